@@ -1,0 +1,1 @@
+# Sources of common/agent (added to indrive_common).

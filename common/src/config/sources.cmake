@@ -1,0 +1,1 @@
+# Sources of common/config (added to indrive_common).

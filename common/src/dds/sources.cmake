@@ -1,0 +1,1 @@
+# Sources of common/dds (added to indrive_common).

@@ -1,0 +1,1 @@
+# Sources of common/nn (added to indrive_common).

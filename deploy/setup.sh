@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# Sets up InDRiVE-on-SUMO on a Debian 12 machine, builds it, and runs the main job or the tests.
+#
+#   bash deploy/setup.sh run    # install what is missing, build, run the main job (tiny preset)
+#   bash deploy/setup.sh test   # install what is missing, build, run the test suite
+#   bash deploy/setup.sh build  # install what is missing and build only
+#
+# Idempotent: installs only missing packages (as root directly, otherwise through sudo) and
+# rebuilds only what changed. The build goes to build/ (Release).
+set -euo pipefail
+
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+root=$(cd "$here/.." && pwd)
+build_dir=${INDRIVE_BUILD_DIR:-$root/build}
+mode=${1:-build}
+
+# Debian 12 packages the build and the tests need (the README's dependency table says why).
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
+  sumo
+  libeigen3-dev libopencv-dev
+  libyaml-cpp-dev zlib1g-dev libzstd-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  ffmpeg
+)
+
+say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
+
+install_missing() {
+  local missing=()
+  for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
+      missing+=("$p")
+  done
+  if [ ${#missing[@]} -eq 0 ]; then
+    say "all ${#packages[@]} packages present"
+    return
+  fi
+  local sudo=()
+  if [ "$(id -u)" -ne 0 ]; then
+    command -v sudo >/dev/null || {
+      echo "setup: missing packages (${missing[*]}) and not root, and sudo is not installed;" \
+           "install them as root: apt-get install ${missing[*]}" >&2
+      exit 1
+    }
+    sudo=(sudo)
+  fi
+  say "installing: ${missing[*]}"
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -q
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
+    "${missing[@]}"
+}
+
+build() {
+  local jobs
+  jobs=$(nproc)
+  if [ ! -f "$build_dir/build.ninja" ]; then
+    say "configuring into $build_dir"
+    cmake -S "$root" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release
+  fi
+  say "building with $jobs jobs"
+  cmake --build "$build_dir" -j "$jobs"
+}
+
+run_tests() {
+  # unit + integration + smoke; benchmarks (label bench) run only on request: ctest -L bench
+  say "running tests (unit, integration, smoke)"
+  ctest --test-dir "$build_dir" -LE bench --output-on-failure -j "$(nproc)" --timeout 600
+}
+
+run_main() {
+  "$root/deploy/main_job.sh" "$build_dir"
+}
+
+case "$mode" in
+  build) install_missing; build ;;
+  test) install_missing; build; run_tests ;;
+  run) install_missing; build; run_main ;;
+  *) echo "usage: $0 run|test|build" >&2; exit 2 ;;
+esac
