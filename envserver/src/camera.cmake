@@ -1,0 +1,1 @@
+# Sources of the envserver camera area (added to indrive_envserver).

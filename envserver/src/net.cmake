@@ -1,0 +1,1 @@
+# Sources of the envserver net area (added to indrive_envserver).

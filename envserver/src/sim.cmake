@@ -1,0 +1,1 @@
+# Sources of the envserver sim area (added to indrive_envserver).
