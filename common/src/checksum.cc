@@ -12,8 +12,8 @@ std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t seed) {
   const auto* bytes = static_cast<const Bytef*>(data);
   uLong crc = seed;
   while (size > 0) {
-    const auto piece = static_cast<uInt>(
-        std::min<std::size_t>(size, std::numeric_limits<uInt>::max() / 2));
+    const auto piece =
+        static_cast<uInt>(std::min<std::size_t>(size, std::numeric_limits<uInt>::max() / 2));
     crc = ::crc32(crc, bytes, piece);
     bytes += piece;
     size -= piece;

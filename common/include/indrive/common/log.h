@@ -63,7 +63,13 @@ class Line {
 
 }  // namespace indrive::log
 
-#define INDRIVE_LOG(severity, category)                                     \
-  if (::indrive::log::Level::severity < ::indrive::log::level()) {            \
-  } else                                                                      \
+#define INDRIVE_LOG(severity, category)                            \
+  if (::indrive::log::Level::severity < ::indrive::log::level()) { \
+  } else                                                           \
     ::indrive::log::Line(::indrive::log::Level::severity, category, __FILE__, __LINE__)
+
+// Same as INDRIVE_LOG with a level chosen at run time: INDRIVE_LOG_AT(ok ? kInfo : kWarn, ...).
+#define INDRIVE_LOG_AT(level_value, category)    \
+  if ((level_value) < ::indrive::log::level()) { \
+  } else                                         \
+    ::indrive::log::Line((level_value), category, __FILE__, __LINE__)
