@@ -20,7 +20,7 @@ packages=(
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
   sumo
   libeigen3-dev libopencv-dev
-  libyaml-cpp-dev zlib1g-dev libzstd-dev
+  libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libpugixml-dev zlib1g-dev libzstd-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   ffmpeg
 )

@@ -1,0 +1,96 @@
+// The run directory (docs/architecture.md, section 7) and crash-safe file writing.
+//
+//   runs/<run_id>/config.yaml      fully resolved configuration
+//   runs/<run_id>/checkpoints/     atomic writes, newest N kept
+//   runs/<run_id>/metrics.jsonl    one JSON object per log interval
+//   runs/<run_id>/eval/*.csv       one row per episode
+//   runs/<run_id>/report.md, plots/*.png, videos/*.mp4
+//
+//   RunDir run = RunDir::open_or_create("runs", "pretrain-disag-s0");
+//   atomic_write(run.checkpoints() / "ckpt-000100.bin", bytes);
+//   MetricsLog metrics(run.metrics_path());
+//   metrics.write({{"env_steps", 1000}, {"wm_loss", 2.5}});
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json_fwd.hpp>
+#include <optional>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace indrive {
+
+// A file could not be read or written; the message names the path and the reason.
+class IoError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Writes `bytes` to `path` so that a crash at any moment leaves either the old file or the
+// complete new one, never a partial file: write a temporary sibling, fsync it, rename it over
+// `path`, fsync the directory.
+void atomic_write(const std::filesystem::path& path, std::span<const std::uint8_t> bytes);
+void atomic_write(const std::filesystem::path& path, const std::string& text);
+
+// Reads a whole file; throws IoError naming the path if it cannot.
+std::vector<std::uint8_t> read_file(const std::filesystem::path& path);
+
+// A run's directory with its fixed layout.
+class RunDir {
+ public:
+  // Creates runs_root/run_id and its subfolders if missing. A run id may hold letters, digits,
+  // '-', '_' and '.'; anything else throws std::invalid_argument naming the bad character.
+  static RunDir open_or_create(const std::filesystem::path& runs_root, const std::string& run_id);
+
+  const std::string& run_id() const { return run_id_; }
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path config_path() const { return path_ / "config.yaml"; }
+  std::filesystem::path metrics_path() const { return path_ / "metrics.jsonl"; }
+  std::filesystem::path checkpoints() const { return path_ / "checkpoints"; }
+  std::filesystem::path eval() const { return path_ / "eval"; }
+  std::filesystem::path plots() const { return path_ / "plots"; }
+  std::filesystem::path videos() const { return path_ / "videos"; }
+  std::filesystem::path report_path() const { return path_ / "report.md"; }
+
+ private:
+  RunDir(std::string run_id, std::filesystem::path path)
+      : run_id_(std::move(run_id)), path_(std::move(path)) {}
+  std::string run_id_;
+  std::filesystem::path path_;
+};
+
+// Checkpoints named ckpt-<12-digit counter>.bin in one folder, newest `keep` retained.
+class CheckpointFiles {
+ public:
+  CheckpointFiles(std::filesystem::path folder, int keep);
+  // Writes a checkpoint atomically for `counter` (e.g. the update count), then deletes all
+  // but the newest `keep`. Returns its path.
+  std::filesystem::path save(std::uint64_t counter, std::span<const std::uint8_t> bytes);
+  // The newest complete checkpoint, if any (temporary files of an interrupted write are
+  // ignored).
+  std::optional<std::filesystem::path> newest() const;
+  // All checkpoints, oldest first.
+  std::vector<std::filesystem::path> list() const;
+
+ private:
+  std::filesystem::path folder_;
+  int keep_;
+};
+
+// Appends one JSON object per line to metrics.jsonl, flushed per line so a crash loses at
+// most the line being written. Each line gets "time" (Unix seconds) if it lacks one.
+class MetricsLog {
+ public:
+  explicit MetricsLog(const std::filesystem::path& path);
+  void write(const nlohmann::json& record);
+
+ private:
+  std::filesystem::path path_;
+  std::ofstream out_;
+};
+
+}  // namespace indrive
