@@ -1,0 +1,36 @@
+// `indrive launch`: the processes of one training run on this host.
+//
+// Builds the process list (learner, N actors, M evaluators) for a config and a run directory,
+// and runs it under a Supervisor with a combined progress view.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "indrive/deploy/supervisor.h"
+
+namespace indrive::deploy {
+
+struct LaunchOptions {
+  std::filesystem::path config;  // YAML config given to every process
+  std::filesystem::path runs_dir = "runs";
+  std::string run_id;
+  int actors = 2;
+  int evaluators = 1;
+  int domain_id = 0;
+  std::filesystem::path dds_profile;   // XML profiles file; empty: the processes' default
+  std::vector<std::string> overrides;  // --set key=value, forwarded to every process
+  std::filesystem::path bin_dir;       // where indrive-learner and indrive-actor live
+  double status_interval_s = 10.0;     // how often the combined status line is printed
+};
+
+// The process specs for `options`: the learner (essential), actors restarted on failure with
+// back-off, evaluators that run once. Output of each goes to <run>/logs/<name>.log too.
+std::vector<ProcessSpec> launch_plan(const LaunchOptions& options);
+
+// Runs the plan until the learner ends or SIGINT/SIGTERM arrives, then stops everything.
+// Returns the learner's exit code (0 on a clean stop by signal).
+int run_launch(const LaunchOptions& options);
+
+}  // namespace indrive::deploy
