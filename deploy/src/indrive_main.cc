@@ -9,7 +9,9 @@
 #include <string>
 
 #include "indrive/common/log.h"
+#include "indrive/common/run_dir.h"
 #include "indrive/deploy/launch.h"
+#include "indrive/deploy/report.h"
 
 namespace fs = std::filesystem;
 
@@ -57,12 +59,38 @@ int main(int argc, char** argv) {
                    "seconds between combined status lines")
       ->capture_default_str();
 
+  std::vector<fs::path> report_inputs;
+  fs::path report_out = "report";
+  std::string seen_town = "town01";
+  std::string heldout_town = "town02";
+  auto* report_cmd = app.add_subcommand(
+      "report", "write the paper's tables (report.md, report.csv, report.tex) from results");
+  report_cmd->add_option("inputs", report_inputs, "run directories, eval folders or CSV files")
+      ->required();
+  report_cmd->add_option("--out", report_out, "output folder")->capture_default_str();
+  report_cmd->add_option("--seen-town", seen_town, "training town for the gap")
+      ->capture_default_str();
+  report_cmd->add_option("--heldout-town", heldout_town, "held-out town for the gap")
+      ->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     if (*launch_cmd) {
       launch.bin_dir = own_folder();
       return indrive::deploy::run_launch(launch);
+    }
+    if (*report_cmd) {
+      const auto records = indrive::deploy::load_results(report_inputs);
+      const auto report = indrive::deploy::aggregate(records);
+      fs::create_directories(report_out);
+      indrive::atomic_write(report_out / "report.md",
+                            indrive::deploy::render_markdown(report, seen_town, heldout_town));
+      indrive::atomic_write(report_out / "report.csv", indrive::deploy::render_csv(report));
+      indrive::atomic_write(report_out / "report.tex", indrive::deploy::render_latex(report));
+      std::printf("%d episodes from %zu run(s) -> %s/report.md (.csv, .tex)\n", report.episodes,
+                  report.runs.size(), report_out.c_str());
+      return 0;
     }
   } catch (const std::exception& error) {
     std::fprintf(stderr, "indrive: %s\n", error.what());

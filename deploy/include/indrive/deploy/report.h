@@ -1,0 +1,78 @@
+// `indrive report`: the paper's result tables from evaluation results.
+//
+// Zero-shot (exploration policy) and few-shot (lane following, collision avoidance) success
+// rates per town and route, averages over routes, and the seen-minus-held-out generalisation
+// gap, with the episodes behind each cell and a 95% confidence interval.
+//
+// Averaging, as in the paper: within one training run, SR of a (town, route) cell is the
+// uniform mean over the densities evaluated; the table cell is the mean over training seeds.
+// The interval is a t-interval over seed means when there are 2 or more seeds, otherwise a
+// Wilson score interval on the pooled episodes of the cell.
+//
+//   indrive report runs/disag-s0 runs/icm-s0 runs/rnd-s0 --out runs/report
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "indrive/common/episode_csv.h"
+
+namespace indrive::deploy {
+
+// Success-rate statistics of one table cell, in percent.
+struct CellStats {
+  int episodes = 0;  // episodes behind the cell, all seeds and densities
+  int successes = 0;
+  int seeds = 0;    // training seeds averaged
+  double sr = 0.0;  // mean over seeds of (mean over densities of per-density SR)
+  double ci_low = 0.0;
+  double ci_high = 0.0;
+  double fr() const { return 100.0 - sr; }
+};
+
+// Which table a result belongs to: (eval_kind, task), e.g. ("zero_shot", "exploration").
+struct TableKey {
+  std::string eval_kind;
+  std::string task;
+  auto operator<=>(const TableKey&) const = default;
+};
+
+struct Table {
+  std::vector<std::string> methods;  // rows, in first-seen order
+  std::vector<std::string> towns;    // in first-seen order
+  std::vector<std::string> routes;   // paper order first, then others alphabetically
+  // [method][town][route] -> stats; missing when never evaluated.
+  std::map<std::string, std::map<std::string, std::map<std::string, CellStats>>> cells;
+  // [method][town][route][failure reason] -> episodes ending with it.
+  std::map<std::string, std::map<std::string, std::map<std::string, std::map<std::string, int>>>>
+      failures;
+};
+
+struct Report {
+  std::map<TableKey, Table> tables;
+  int episodes = 0;
+  std::vector<std::string> runs;
+};
+
+// Aggregates records into tables. Throws std::invalid_argument if `records` is empty.
+Report aggregate(const std::vector<EpisodeRecord>& records);
+
+// Mean SR over the routes of one town for one method; NaN if that town has no cells.
+double average_over_routes(const Table& table, const std::string& method, const std::string& town);
+
+// Renders the tables. `seen_town`/`heldout_town` name the generalisation-gap columns.
+std::string render_markdown(const Report& report, const std::string& seen_town,
+                            const std::string& heldout_town);
+std::string render_latex(const Report& report);
+std::string render_csv(const Report& report);
+
+// Reads every results CSV under `inputs` (run directories: their eval/ folder; folders: their
+// *.csv; or files). Throws CsvError naming what was searched when nothing is found.
+std::vector<EpisodeRecord> load_results(const std::vector<std::filesystem::path>& inputs);
+
+// 95% Wilson score interval for `successes` out of `n`, in percent.
+std::pair<double, double> wilson_interval(int successes, int n);
+
+}  // namespace indrive::deploy

@@ -1,0 +1,364 @@
+#include "indrive/deploy/report.h"
+
+#include <algorithm>
+#include <cmath>
+#include <iomanip>
+#include <limits>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+namespace indrive::deploy {
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::vector<std::string> kPaperRouteOrder = {"straight", "right_loop", "left_loop",
+                                                   "two_turn"};
+const std::vector<std::string> kFailureOrder = {"collision", "lane_invasion", "wrong_direction",
+                                                "off_road",  "stall",         "time_limit"};
+
+// Two-sided 97.5% quantile of Student's t for `dof` degrees of freedom.
+double t_quantile_975(int dof) {
+  static const double table[] = {0,     12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365,
+                                 2.306, 2.262,  2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
+                                 2.120, 2.110,  2.101, 2.093, 2.086, 2.080, 2.074, 2.069,
+                                 2.064, 2.060,  2.056, 2.052, 2.048, 2.045, 2.042};
+  if (dof < 1) return std::numeric_limits<double>::quiet_NaN();
+  return dof <= 30 ? table[dof] : 1.96;
+}
+
+std::string fixed(double value, int digits = 1) {
+  if (std::isnan(value)) return "-";
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(digits) << value;
+  return out.str();
+}
+
+std::string title_of(const TableKey& key) {
+  if (key.eval_kind == "zero_shot")
+    return "Zero-shot: " + key.task + " policy, all parameters frozen";
+  if (key.eval_kind == "few_shot") return "Few-shot: " + key.task;
+  return key.eval_kind + ": " + key.task;
+}
+
+void push_unique(std::vector<std::string>& list, const std::string& value) {
+  if (std::find(list.begin(), list.end(), value) == list.end()) list.push_back(value);
+}
+
+}  // namespace
+
+std::pair<double, double> wilson_interval(int successes, int n) {
+  if (n <= 0) return {0.0, 100.0};
+  const double z = 1.959964;
+  const double p = static_cast<double>(successes) / n;
+  const double denominator = 1.0 + z * z / n;
+  const double centre = (p + z * z / (2.0 * n)) / denominator;
+  const double half = z * std::sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / denominator;
+  return {100.0 * std::max(0.0, centre - half), 100.0 * std::min(1.0, centre + half)};
+}
+
+Report aggregate(const std::vector<EpisodeRecord>& records) {
+  if (records.empty()) throw std::invalid_argument("no episode results to report on");
+  Report report;
+  report.episodes = static_cast<int>(records.size());
+  // counts[table][method][town][route][seed][density] = {episodes, successes}
+  std::map<
+      TableKey,
+      std::map<std::string,
+               std::map<std::string,
+                        std::map<std::string, std::map<int, std::map<int, std::pair<int, int>>>>>>>
+      counts;
+  std::set<std::string> other_routes;
+  for (const auto& r : records) {
+    const TableKey key{r.eval_kind, r.task};
+    Table& table = report.tables[key];
+    push_unique(table.methods, r.method);
+    push_unique(table.towns, r.town);
+    push_unique(report.runs, r.run_id);
+    auto& cell = counts[key][r.method][r.town][r.route][r.train_seed][r.density];
+    ++cell.first;
+    if (r.success) {
+      ++cell.second;
+    } else {
+      ++table.failures[r.method][r.town][r.route]
+                      [r.failure_reason.empty() ? "unknown" : r.failure_reason];
+    }
+    if (std::find(kPaperRouteOrder.begin(), kPaperRouteOrder.end(), r.route) ==
+        kPaperRouteOrder.end()) {
+      other_routes.insert(r.route);
+    }
+  }
+  for (auto& [key, table] : report.tables) {
+    std::set<std::string> present;
+    for (const auto& [method, towns] : counts[key]) {
+      for (const auto& [town, routes] : towns) {
+        for (const auto& [route, seeds] : routes) present.insert(route);
+      }
+    }
+    for (const auto& route : kPaperRouteOrder) {
+      if (present.count(route)) table.routes.push_back(route);
+    }
+    for (const auto& route : other_routes) {
+      if (present.count(route)) table.routes.push_back(route);
+    }
+    for (const auto& [method, towns] : counts[key]) {
+      for (const auto& [town, routes] : towns) {
+        for (const auto& [route, seeds] : routes) {
+          CellStats stats;
+          std::vector<double> seed_means;
+          for (const auto& [seed, densities] : seeds) {
+            double sum = 0.0;
+            for (const auto& [density, count] : densities) {
+              sum += 100.0 * count.second / count.first;
+              stats.episodes += count.first;
+              stats.successes += count.second;
+            }
+            seed_means.push_back(sum / static_cast<double>(densities.size()));
+          }
+          stats.seeds = static_cast<int>(seed_means.size());
+          double mean = 0.0;
+          for (const double m : seed_means) mean += m;
+          mean /= static_cast<double>(seed_means.size());
+          stats.sr = mean;
+          if (seed_means.size() >= 2) {
+            double variance = 0.0;
+            for (const double m : seed_means) variance += (m - mean) * (m - mean);
+            variance /= static_cast<double>(seed_means.size() - 1);
+            const double half = t_quantile_975(static_cast<int>(seed_means.size()) - 1) *
+                                std::sqrt(variance / static_cast<double>(seed_means.size()));
+            stats.ci_low = std::max(0.0, mean - half);
+            stats.ci_high = std::min(100.0, mean + half);
+          } else {
+            std::tie(stats.ci_low, stats.ci_high) =
+                wilson_interval(stats.successes, stats.episodes);
+          }
+          table.cells[method][town][route] = stats;
+        }
+      }
+    }
+  }
+  return report;
+}
+
+double average_over_routes(const Table& table, const std::string& method, const std::string& town) {
+  const auto m = table.cells.find(method);
+  if (m == table.cells.end()) return std::numeric_limits<double>::quiet_NaN();
+  const auto t = m->second.find(town);
+  if (t == m->second.end() || t->second.empty()) return std::numeric_limits<double>::quiet_NaN();
+  double sum = 0.0;
+  for (const auto& [route, stats] : t->second) sum += stats.sr;
+  return sum / static_cast<double>(t->second.size());
+}
+
+std::string render_markdown(const Report& report, const std::string& seen_town,
+                            const std::string& heldout_town) {
+  std::ostringstream md;
+  md << "# Results\n\n"
+     << report.episodes << " episodes from " << report.runs.size() << " run(s). SR = % of "
+     << "successful episodes, FR = 100 - SR. Each cell: SR averaged uniformly over the "
+     << "densities evaluated, then over training seeds; [95% CI] is a t-interval over seeds "
+     << "when there are 2 or more, otherwise a Wilson interval on the pooled episodes; n = "
+     << "episodes behind the cell.\n";
+  for (const auto& [key, table] : report.tables) {
+    md << "\n## " << title_of(key) << "\n";
+    for (const auto& town : table.towns) {
+      md << "\n### " << town << "\n\n| method |";
+      for (const auto& route : table.routes) md << " " << route << " SR | FR | n |";
+      md << "\n|---|";
+      for (std::size_t i = 0; i < table.routes.size(); ++i) md << "---|---|---|";
+      md << "\n";
+      for (const auto& method : table.methods) {
+        md << "| " << method << " |";
+        for (const auto& route : table.routes) {
+          const auto& by_town = table.cells.at(method);
+          const auto t = by_town.find(town);
+          const CellStats* s = nullptr;
+          if (t != by_town.end()) {
+            const auto r = t->second.find(route);
+            if (r != t->second.end()) s = &r->second;
+          }
+          if (s == nullptr) {
+            md << " - | - | 0 |";
+          } else {
+            md << " " << fixed(s->sr) << " [" << fixed(s->ci_low) << ", " << fixed(s->ci_high)
+               << "] | " << fixed(s->fr()) << " | " << s->episodes << " |";
+          }
+        }
+        md << "\n";
+      }
+    }
+    // Averages over routes and the generalisation gap.
+    md << "\n### Average SR over routes\n\n| method |";
+    for (const auto& town : table.towns) md << " " << town << " |";
+    const bool has_gap =
+        std::find(table.towns.begin(), table.towns.end(), seen_town) != table.towns.end() &&
+        std::find(table.towns.begin(), table.towns.end(), heldout_town) != table.towns.end();
+    if (has_gap) md << " gap (" << seen_town << " - " << heldout_town << ") |";
+    md << "\n|---|";
+    for (std::size_t i = 0; i < table.towns.size() + (has_gap ? 1 : 0); ++i) md << "---|";
+    md << "\n";
+    for (const auto& method : table.methods) {
+      md << "| " << method << " |";
+      for (const auto& town : table.towns)
+        md << " " << fixed(average_over_routes(table, method, town)) << " |";
+      if (has_gap) {
+        md << " "
+           << fixed(average_over_routes(table, method, seen_town) -
+                    average_over_routes(table, method, heldout_town))
+           << " |";
+      }
+      md << "\n";
+    }
+    // Failure reasons per route.
+    std::set<std::string> reasons;
+    for (const auto& [method, towns] : table.failures) {
+      for (const auto& [town, routes] : towns) {
+        for (const auto& [route, counts] : routes) {
+          for (const auto& [reason, n] : counts) reasons.insert(reason);
+        }
+      }
+    }
+    if (!reasons.empty()) {
+      std::vector<std::string> columns;
+      for (const auto& reason : kFailureOrder) {
+        if (reasons.count(reason)) columns.push_back(reason);
+      }
+      for (const auto& reason : reasons) push_unique(columns, reason);
+      md << "\n### Failure reasons (episodes)\n\n| method | town | route |";
+      for (const auto& reason : columns) md << " " << reason << " |";
+      md << "\n|---|---|---|";
+      for (std::size_t i = 0; i < columns.size(); ++i) md << "---|";
+      md << "\n";
+      for (const auto& method : table.methods) {
+        const auto m = table.failures.find(method);
+        if (m == table.failures.end()) continue;
+        for (const auto& town : table.towns) {
+          const auto t = m->second.find(town);
+          if (t == m->second.end()) continue;
+          for (const auto& route : table.routes) {
+            const auto r = t->second.find(route);
+            if (r == t->second.end()) continue;
+            md << "| " << method << " | " << town << " | " << route << " |";
+            for (const auto& reason : columns) {
+              const auto c = r->second.find(reason);
+              md << " " << (c == r->second.end() ? 0 : c->second) << " |";
+            }
+            md << "\n";
+          }
+        }
+      }
+    }
+  }
+  return md.str();
+}
+
+std::string render_csv(const Report& report) {
+  std::ostringstream csv;
+  csv << "eval_kind,task,method,town,route,seeds,episodes,successes,sr,fr,ci_low,ci_high\n";
+  for (const auto& [key, table] : report.tables) {
+    for (const auto& method : table.methods) {
+      for (const auto& town : table.towns) {
+        for (const auto& route : table.routes) {
+          const auto& by_town = table.cells.at(method);
+          const auto t = by_town.find(town);
+          if (t == by_town.end()) continue;
+          const auto r = t->second.find(route);
+          if (r == t->second.end()) continue;
+          const CellStats& s = r->second;
+          csv << key.eval_kind << ',' << key.task << ',' << method << ',' << town << ',' << route
+              << ',' << s.seeds << ',' << s.episodes << ',' << s.successes << ',' << fixed(s.sr, 3)
+              << ',' << fixed(s.fr(), 3) << ',' << fixed(s.ci_low, 3) << ',' << fixed(s.ci_high, 3)
+              << '\n';
+        }
+      }
+    }
+  }
+  return csv.str();
+}
+
+std::string render_latex(const Report& report) {
+  auto escape = [](const std::string& text) {
+    std::string out;
+    for (const char c : text) {
+      if (c == '_' || c == '%' || c == '&' || c == '#') out += '\\';
+      out += c;
+    }
+    return out;
+  };
+  std::ostringstream tex;
+  for (const auto& [key, table] : report.tables) {
+    for (const auto& town : table.towns) {
+      tex << "% " << title_of(key) << ", " << town << "\n\\begin{tabular}{l";
+      for (std::size_t i = 0; i < table.routes.size(); ++i) tex << "rr";
+      tex << "}\n\\hline\nMethod";
+      for (const auto& route : table.routes)
+        tex << " & \\multicolumn{2}{c}{" << escape(route) << "}";
+      tex << " \\\\\n";
+      for (std::size_t i = 0; i < table.routes.size(); ++i) tex << " & SR & FR";
+      tex << " \\\\\n\\hline\n";
+      for (const auto& method : table.methods) {
+        tex << escape(method);
+        for (const auto& route : table.routes) {
+          const auto& by_town = table.cells.at(method);
+          const auto t = by_town.find(town);
+          const CellStats* s = nullptr;
+          if (t != by_town.end()) {
+            const auto r = t->second.find(route);
+            if (r != t->second.end()) s = &r->second;
+          }
+          if (s == nullptr) {
+            tex << " & -- & --";
+          } else {
+            tex << " & " << fixed(s->sr) << " & " << fixed(s->fr());
+          }
+        }
+        tex << " \\\\\n";
+      }
+      tex << "\\hline\n\\end{tabular}\n\n";
+    }
+  }
+  return tex.str();
+}
+
+std::vector<EpisodeRecord> load_results(const std::vector<fs::path>& inputs) {
+  if (inputs.empty()) throw CsvError("no results given: name run directories or CSV files");
+  std::vector<fs::path> files;
+  for (const auto& input : inputs) {
+    if (fs::is_regular_file(input)) {
+      files.push_back(input);
+      continue;
+    }
+    if (!fs::is_directory(input)) {
+      std::string message = "results path ";
+      message += input.string();
+      message += " does not exist";
+      throw CsvError(message);
+    }
+    const fs::path folder = fs::is_directory(input / "eval") ? input / "eval" : input;
+    std::vector<fs::path> found;
+    for (const auto& entry : fs::directory_iterator(folder)) {
+      if (entry.is_regular_file() && entry.path().extension() == ".csv")
+        found.push_back(entry.path());
+    }
+    std::sort(found.begin(), found.end());
+    files.insert(files.end(), found.begin(), found.end());
+  }
+  std::vector<EpisodeRecord> records;
+  for (const auto& file : files) {
+    auto part = read_episode_csv(file);
+    records.insert(records.end(), part.begin(), part.end());
+  }
+  if (records.empty()) {
+    std::string message = "no episode results found in";
+    for (const auto& input : inputs) {
+      message += ' ';
+      message += input.string();
+    }
+    message += "; run an evaluation first (indrive-actor --evaluate writes <run>/eval/*.csv)";
+    throw CsvError(message);
+  }
+  return records;
+}
+
+}  // namespace indrive::deploy

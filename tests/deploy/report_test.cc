@@ -1,0 +1,97 @@
+#include "indrive/deploy/report.h"
+
+#include <gtest/gtest.h>
+
+#include "testing.h"
+
+namespace indrive::deploy {
+namespace {
+
+// n episodes of one cell, the first `successes` of them successful.
+void add_episodes(std::vector<EpisodeRecord>& out, const std::string& method, int seed,
+                  const std::string& town, const std::string& route, int density, int n,
+                  int successes, const std::string& failure = "collision") {
+  for (int i = 0; i < n; ++i) {
+    out.push_back({.run_id = method + "-s" + std::to_string(seed),
+                   .method = method,
+                   .eval_kind = "zero_shot",
+                   .task = "exploration",
+                   .train_seed = seed,
+                   .town = town,
+                   .route = route,
+                   .density = density,
+                   .episode = i,
+                   .success = i < successes,
+                   .failure_reason = i < successes ? "" : failure});
+  }
+}
+
+TEST(Report, AveragesUniformlyOverDensitiesThenSeeds) {
+  std::vector<EpisodeRecord> records;
+  // Seed 0: density 5 -> 4/4 = 100 %, density 20 -> 1/2 = 50 %  => 75 % (pooled would be 83 %).
+  add_episodes(records, "disag", 0, "town01", "straight", 5, 4, 4);
+  add_episodes(records, "disag", 0, "town01", "straight", 20, 2, 1);
+  // Seed 1: density 5 -> 1/2 = 50 %, density 20 -> 0/2 = 0 %     => 25 %.
+  add_episodes(records, "disag", 1, "town01", "straight", 5, 2, 1);
+  add_episodes(records, "disag", 1, "town01", "straight", 20, 2, 0);
+  const Report report = aggregate(records);
+  const Table& table = report.tables.at({"zero_shot", "exploration"});
+  const CellStats& cell = table.cells.at("disag").at("town01").at("straight");
+  EXPECT_EQ(cell.episodes, 10);
+  EXPECT_EQ(cell.successes, 6);
+  EXPECT_EQ(cell.seeds, 2);
+  EXPECT_DOUBLE_EQ(cell.sr, 50.0);
+  EXPECT_DOUBLE_EQ(cell.fr(), 50.0);
+  // t-interval over seed means {75, 25}: sd = 35.355, half = 12.706 * 35.355 / sqrt(2) = 317.6,
+  // clipped to [0, 100].
+  EXPECT_DOUBLE_EQ(cell.ci_low, 0.0);
+  EXPECT_DOUBLE_EQ(cell.ci_high, 100.0);
+  EXPECT_EQ(table.failures.at("disag").at("town01").at("straight").at("collision"), 4);
+}
+
+TEST(Report, WilsonIntervalMatchesTheFormula) {
+  // 8 of 10: centre (0.8 + 1.92/10) / 1.384 = 0.7168, half 0.2271 -> [49.0, 94.3] %.
+  const auto [low, high] = wilson_interval(8, 10);
+  EXPECT_NEAR(low, 49.02, 0.05);
+  EXPECT_NEAR(high, 94.33, 0.05);
+  const auto [zero_low, zero_high] = wilson_interval(0, 50);
+  EXPECT_DOUBLE_EQ(zero_low, 0.0);
+  EXPECT_NEAR(zero_high, 7.13, 0.05);
+}
+
+TEST(Report, RoutesInPaperOrderAveragesAndTheGeneralisationGap) {
+  std::vector<EpisodeRecord> records;
+  add_episodes(records, "icm", 0, "town01", "two_turn", 10, 4, 1);              // 25 %
+  add_episodes(records, "icm", 0, "town01", "straight", 10, 4, 3);              // 75 %
+  add_episodes(records, "icm", 0, "town02", "straight", 10, 4, 2);              // 50 %
+  add_episodes(records, "icm", 0, "town02", "two_turn", 10, 4, 0, "off_road");  // 0 %
+  const Report report = aggregate(records);
+  const Table& table = report.tables.at({"zero_shot", "exploration"});
+  EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "two_turn"}));
+  EXPECT_DOUBLE_EQ(average_over_routes(table, "icm", "town01"), 50.0);
+  EXPECT_DOUBLE_EQ(average_over_routes(table, "icm", "town02"), 25.0);
+  const std::string md = render_markdown(report, "town01", "town02");
+  EXPECT_NE(md.find("| icm | 50.0 | 25.0 | 25.0 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| icm | 75.0 ["), std::string::npos) << md;
+  EXPECT_NE(md.find("off_road"), std::string::npos);
+  const std::string csv = render_csv(report);
+  EXPECT_NE(csv.find("zero_shot,exploration,icm,town02,two_turn,1,4,0,0.000,100.000"),
+            std::string::npos)
+      << csv;
+  EXPECT_NE(render_latex(report).find("\\multicolumn{2}{c}{two\\_turn}"), std::string::npos);
+}
+
+TEST(Report, EmptyInputsAreClearErrors) {
+  testing::TempDir dir;
+  EXPECT_THROW(aggregate({}), std::invalid_argument);
+  try {
+    load_results({dir.path()});
+    FAIL();
+  } catch (const CsvError& error) {
+    EXPECT_NE(std::string(error.what()).find("run an evaluation first"), std::string::npos);
+  }
+  EXPECT_THROW(load_results({dir.path() / "missing"}), CsvError);
+}
+
+}  // namespace
+}  // namespace indrive::deploy
