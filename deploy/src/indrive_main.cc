@@ -11,6 +11,7 @@
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
 #include "indrive/deploy/launch.h"
+#include "indrive/deploy/plot.h"
 #include "indrive/deploy/report.h"
 
 namespace fs = std::filesystem;
@@ -73,12 +74,25 @@ int main(int argc, char** argv) {
   report_cmd->add_option("--heldout-town", heldout_town, "held-out town for the gap")
       ->capture_default_str();
 
+  fs::path plot_run;
+  std::string plot_x = "env_steps";
+  auto* plot_cmd = app.add_subcommand(
+      "plot", "draw learning curves of a run (metrics.jsonl) into <run>/plots/*.png");
+  plot_cmd->add_option("run", plot_run, "run directory")->required()->check(CLI::ExistingDirectory);
+  plot_cmd->add_option("--x", plot_x, "metric on the x axis")->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     if (*launch_cmd) {
       launch.bin_dir = own_folder();
       return indrive::deploy::run_launch(launch);
+    }
+    if (*plot_cmd) {
+      const auto files =
+          indrive::deploy::plot_metrics(plot_run / "metrics.jsonl", plot_run / "plots", plot_x);
+      for (const auto& file : files) std::printf("%s\n", file.c_str());
+      return 0;
     }
     if (*report_cmd) {
       const auto records = indrive::deploy::load_results(report_inputs);

@@ -1,0 +1,54 @@
+// Line plots to PNG for learning curves (losses, intrinsic reward, SR over env steps).
+//
+//   LinePlot plot("World-model loss", "env steps", "loss");
+//   plot.add_series("disag", xs, ys);
+//   plot.save("runs/x/plots/wm_loss.png");
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json_fwd.hpp>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+namespace indrive::deploy {
+
+class LinePlot {
+ public:
+  LinePlot(std::string title, std::string x_label, std::string y_label);
+
+  // Adds a named series; x and y must have the same length. Non-finite points are skipped.
+  void add_series(const std::string& name, std::vector<double> x, std::vector<double> y);
+  // Smooths every series with an exponential moving average of this weight (0: none) when
+  // drawing; the raw series is drawn faintly behind it.
+  void set_smoothing(double weight) { smoothing_ = weight; }
+  bool empty() const { return series_.empty(); }
+
+  // Renders the plot (BGR, width x height).
+  cv::Mat render(int width = 800, int height = 480) const;
+  // Renders and writes a PNG; throws IoError naming the path if it cannot.
+  void save(const std::filesystem::path& path, int width = 800, int height = 480) const;
+
+ private:
+  struct Series {
+    std::string name;
+    std::vector<double> x;
+    std::vector<double> y;
+  };
+  std::string title_;
+  std::string x_label_;
+  std::string y_label_;
+  std::vector<Series> series_;
+  double smoothing_ = 0.0;
+};
+
+// "Nice" tick positions (1, 2, 5 x 10^k steps) covering [low, high], about `count` of them.
+std::vector<double> nice_ticks(double low, double high, int count);
+
+// Writes one PNG per numeric key of metrics.jsonl (other than the x key) into `out_dir`,
+// against `x_key` (default env_steps). Returns the files written.
+std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& metrics_jsonl,
+                                                const std::filesystem::path& out_dir,
+                                                const std::string& x_key = "env_steps");
+
+}  // namespace indrive::deploy

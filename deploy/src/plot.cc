@@ -1,0 +1,214 @@
+#include "indrive/deploy/plot.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+
+#include "indrive/common/run_dir.h"
+
+namespace indrive::deploy {
+namespace {
+
+// Tableau-like colours, BGR.
+const cv::Scalar kColours[] = {{180, 119, 31},  {14, 127, 255}, {44, 160, 44},   {40, 39, 214},
+                               {189, 103, 148}, {75, 86, 140},  {194, 119, 227}, {127, 127, 127}};
+
+std::string tick_label(double value, double step) {
+  // Large values get a k or M suffix scaled by the whole axis step, so one axis never mixes
+  // notations ("50k, 100k", not "50000, 1.00e+05").
+  const double magnitude = std::max(std::abs(value), std::abs(step));
+  double scale = 1.0;
+  const char* suffix = "";
+  if (magnitude >= 1e6) {
+    scale = 1e6;
+    suffix = "M";
+  } else if (magnitude >= 1e3) {
+    scale = 1e3;
+    suffix = "k";
+  }
+  const double scaled_step = step / scale;
+  std::ostringstream out;
+  if (magnitude > 0 && magnitude < 1e-3) {
+    out << std::setprecision(2) << std::scientific << value;
+    return out.str();
+  }
+  const int decimals =
+      scaled_step >= 1 ? 0 : static_cast<int>(std::ceil(-std::log10(scaled_step) - 1e-9));
+  out << std::fixed << std::setprecision(decimals) << value / scale << suffix;
+  return out.str();
+}
+
+}  // namespace
+
+std::vector<double> nice_ticks(double low, double high, int count) {
+  if (!(high > low)) return {low};
+  const double raw = (high - low) / std::max(1, count);
+  const double power = std::pow(10.0, std::floor(std::log10(raw)));
+  double step = power;
+  for (const double m : {1.0, 2.0, 5.0, 10.0}) {
+    step = m * power;
+    if (step >= raw) break;
+  }
+  std::vector<double> ticks;
+  for (double t = std::ceil(low / step) * step; t <= high + step * 1e-9; t += step) {
+    ticks.push_back(std::abs(t) < step * 1e-9 ? 0.0 : t);
+  }
+  return ticks;
+}
+
+LinePlot::LinePlot(std::string title, std::string x_label, std::string y_label)
+    : title_(std::move(title)), x_label_(std::move(x_label)), y_label_(std::move(y_label)) {}
+
+void LinePlot::add_series(const std::string& name, std::vector<double> x, std::vector<double> y) {
+  if (x.size() != y.size()) {
+    throw std::invalid_argument("series '" + name + "': x has " + std::to_string(x.size()) +
+                                " points, y has " + std::to_string(y.size()));
+  }
+  series_.push_back({name, std::move(x), std::move(y)});
+}
+
+cv::Mat LinePlot::render(int width, int height) const {
+  cv::Mat image(height, width, CV_8UC3, cv::Scalar(255, 255, 255));
+  const int left = 80, right = 20, top = 40, bottom = 55;
+  const cv::Rect area(left, top, width - left - right, height - top - bottom);
+  const int font = cv::FONT_HERSHEY_SIMPLEX;
+
+  double x_min = std::numeric_limits<double>::infinity(), x_max = -x_min;
+  double y_min = x_min, y_max = -x_min;
+  for (const auto& s : series_) {
+    for (std::size_t i = 0; i < s.x.size(); ++i) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+      x_min = std::min(x_min, s.x[i]);
+      x_max = std::max(x_max, s.x[i]);
+      y_min = std::min(y_min, s.y[i]);
+      y_max = std::max(y_max, s.y[i]);
+    }
+  }
+  cv::putText(image, title_, {left, 25}, font, 0.6, {0, 0, 0}, 1, cv::LINE_AA);
+  if (!std::isfinite(x_min)) {
+    cv::putText(image, "no data", {area.x + area.width / 2 - 30, area.y + area.height / 2}, font,
+                0.6, {80, 80, 80}, 1, cv::LINE_AA);
+    return image;
+  }
+  if (x_max == x_min) x_max = x_min + 1.0;
+  if (y_max == y_min) {
+    y_max += 0.5 * std::max(1.0, std::abs(y_max));
+    y_min -= 0.5 * std::max(1.0, std::abs(y_min));
+  }
+  const double pad = 0.05 * (y_max - y_min);
+  y_min -= pad;
+  y_max += pad;
+  auto to_pixel = [&](double x, double y) {
+    return cv::Point2d(area.x + (x - x_min) / (x_max - x_min) * area.width,
+                       area.y + area.height - (y - y_min) / (y_max - y_min) * area.height);
+  };
+
+  // Grid, ticks and labels.
+  const auto x_ticks = nice_ticks(x_min, x_max, 6);
+  const auto y_ticks = nice_ticks(y_min, y_max, 6);
+  const double x_step = x_ticks.size() > 1 ? x_ticks[1] - x_ticks[0] : 1.0;
+  const double y_step = y_ticks.size() > 1 ? y_ticks[1] - y_ticks[0] : 1.0;
+  for (const double t : x_ticks) {
+    const auto p = to_pixel(t, y_min);
+    cv::line(image, {int(p.x), area.y}, {int(p.x), area.y + area.height}, {230, 230, 230});
+    const std::string label = tick_label(t, x_step);
+    cv::putText(image, label, {int(p.x) - 4 * int(label.size()), area.y + area.height + 18}, font,
+                0.4, {0, 0, 0}, 1, cv::LINE_AA);
+  }
+  for (const double t : y_ticks) {
+    const auto p = to_pixel(x_min, t);
+    cv::line(image, {area.x, int(p.y)}, {area.x + area.width, int(p.y)}, {230, 230, 230});
+    const std::string label = tick_label(t, y_step);
+    cv::putText(image, label, {area.x - 8 - 8 * int(label.size()), int(p.y) + 4}, font, 0.4,
+                {0, 0, 0}, 1, cv::LINE_AA);
+  }
+  cv::rectangle(image, area, {0, 0, 0});
+  cv::putText(image, x_label_, {area.x + area.width / 2 - 4 * int(x_label_.size()), height - 12},
+              font, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
+  cv::putText(image, y_label_, {8, top - 8}, font, 0.45, {60, 60, 60}, 1, cv::LINE_AA);
+
+  // Series: raw faintly when smoothing, then the (smoothed) line, then the legend.
+  cv::Mat canvas = image(area).clone();
+  for (std::size_t k = 0; k < series_.size(); ++k) {
+    const auto& s = series_[k];
+    const cv::Scalar colour = kColours[k % std::size(kColours)];
+    const cv::Scalar faint = (colour + cv::Scalar(255, 255, 255) * 2) / 3;
+    std::vector<cv::Point> raw, smooth;
+    double ema = std::numeric_limits<double>::quiet_NaN();
+    for (std::size_t i = 0; i < s.x.size(); ++i) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+      ema = std::isnan(ema) ? s.y[i] : smoothing_ * ema + (1.0 - smoothing_) * s.y[i];
+      const auto p = to_pixel(s.x[i], s.y[i]);
+      const auto q = to_pixel(s.x[i], ema);
+      raw.emplace_back(int(std::lround(p.x)), int(std::lround(p.y)));
+      smooth.emplace_back(int(std::lround(q.x)), int(std::lround(q.y)));
+    }
+    if (smoothing_ > 0.0) cv::polylines(image, raw, false, faint, 1, cv::LINE_AA);
+    cv::polylines(image, smoothing_ > 0.0 ? smooth : raw, false, colour, 2, cv::LINE_AA);
+    if (raw.size() == 1) cv::circle(image, raw[0], 3, colour, cv::FILLED, cv::LINE_AA);
+    const int y = top + 18 + 18 * static_cast<int>(k);
+    cv::line(image, {area.x + area.width - 150, y - 4}, {area.x + area.width - 130, y - 4}, colour,
+             2, cv::LINE_AA);
+    cv::putText(image, s.name, {area.x + area.width - 125, y}, font, 0.45, {0, 0, 0}, 1,
+                cv::LINE_AA);
+  }
+  return image;
+}
+
+void LinePlot::save(const std::filesystem::path& path, int width, int height) const {
+  const cv::Mat image = render(width, height);
+  std::vector<std::uint8_t> png;
+  if (!cv::imencode(".png", image, png)) throw IoError("cannot encode plot " + path.string());
+  atomic_write(path, png);
+}
+
+std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& metrics_jsonl,
+                                                const std::filesystem::path& out_dir,
+                                                const std::string& x_key) {
+  std::ifstream in(metrics_jsonl);
+  if (!in) throw IoError("cannot open " + metrics_jsonl.string());
+  std::map<std::string, std::pair<std::vector<double>, std::vector<double>>> columns;
+  int number = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++number;
+    if (line.empty()) continue;
+    nlohmann::json record;
+    try {
+      record = nlohmann::json::parse(line);
+    } catch (const nlohmann::json::exception&) {
+      // The last line of a crashed run may be cut short; anything else is corrupt.
+      if (in.peek() == EOF) break;
+      throw IoError(metrics_jsonl.string() + ":" + std::to_string(number) + ": not JSON");
+    }
+    if (!record.contains(x_key) || !record[x_key].is_number()) continue;
+    const double x = record[x_key].get<double>();
+    for (const auto& [key, value] : record.items()) {
+      if (key == x_key || key == "time" || !value.is_number()) continue;
+      columns[key].first.push_back(x);
+      columns[key].second.push_back(value.get<double>());
+    }
+  }
+  std::filesystem::create_directories(out_dir);
+  std::vector<std::filesystem::path> written;
+  for (auto& [key, xy] : columns) {
+    LinePlot plot(key, x_key, key);
+    plot.set_smoothing(xy.first.size() > 50 ? 0.9 : 0.0);
+    plot.add_series(key, std::move(xy.first), std::move(xy.second));
+    std::string file = key;
+    std::replace_if(
+        file.begin(), file.end(), [](char c) { return !std::isalnum(c) && c != '_'; }, '_');
+    const auto path = out_dir / (file + ".png");
+    plot.save(path);
+    written.push_back(path);
+  }
+  return written;
+}
+
+}  // namespace indrive::deploy
