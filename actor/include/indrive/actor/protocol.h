@@ -1,0 +1,56 @@
+// The evaluation protocol grid: which episodes an evaluator runs.
+//
+// The paper evaluates every (town, route, density) cell with N episodes, drawing traffic seeds
+// from a fixed set of 3 and spawn seeds from a fixed set of 5, so every method meets exactly
+// the same traffic. Episode i of a cell uses traffic seed i mod 3 and spawn seed i mod 5 of
+// those sets (all 15 pairs appear once in every 15 episodes) and policy seed i, so a sampling
+// policy does not repeat an episode when a seed pair comes round again.
+//
+// Several evaluators split one grid without overlap: the episodes, in grid order, are dealt
+// round-robin, so evaluator k of M runs episodes k, k + M, k + 2M, ...
+//
+//   ProtocolGrid grid{.towns = {"town01", "town02"}, .episodes_per_cell = 50};
+//   for (const EpisodeSpec& e : grid.episodes_for(/*evaluator=*/0, /*of=*/2)) { ... }
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace indrive::actor {
+
+// The fixed seed sets of the protocol (any fixed values serve; these are ours).
+inline constexpr std::array<int, 3> kTrafficSeeds = {101, 202, 303};
+inline constexpr std::array<int, 5> kSpawnSeeds = {11, 22, 33, 44, 55};
+
+// One episode to evaluate.
+struct EpisodeSpec {
+  std::string town;
+  std::string route;
+  int density = 0;
+  int episode = 0;  // index within its cell
+  int traffic_seed = 0;
+  int spawn_seed = 0;
+  std::uint64_t policy_seed = 0;
+  int global_index = 0;  // position in the whole grid, stable across evaluators
+};
+
+struct ProtocolGrid {
+  std::vector<std::string> towns = {"town01", "town02"};
+  std::vector<std::string> routes = {"straight", "right_loop", "left_loop", "two_turn"};
+  std::vector<int> densities = {5, 10, 20};
+  int episodes_per_cell = 50;
+
+  // Throws std::invalid_argument naming the problem: an empty list, a density outside
+  // {5, 10, 20}, a duplicate, or episodes_per_cell < 1.
+  void validate() const;
+  // Every episode of the grid in order: town, route, density, then episode index.
+  std::vector<EpisodeSpec> all_episodes() const;
+  // The episodes evaluator `index` of `count` runs (round-robin deal, no overlap).
+  std::vector<EpisodeSpec> episodes_for(int index, int count) const;
+  // Number of episodes in the whole grid.
+  int size() const;
+};
+
+}  // namespace indrive::actor
