@@ -30,6 +30,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "indrive/envserver/scene.h"
@@ -87,6 +88,8 @@ class SceneCache {
   // crosses the 2^l x 2^l block of base cells.
   const cv::Mat& line_level(int level) const { return levels_[level]; }
   int num_levels() const { return static_cast<int>(levels_.size()); }
+  // The pyramid level whose cell size is at most footprint_m (0 for footprints below a cell).
+  int line_level_for(double footprint_m) const;
   double resolution_m() const { return resolution_m_; }
   // World coordinates of the map's north-west corner (min x, max y).
   Eigen::Vector2d origin() const { return origin_; }
@@ -99,9 +102,10 @@ class SceneCache {
                 std::vector<int>& out) const;
 
  private:
-  void rasterise_ground(const StaticScene& scene);
+  void rasterise_ground(const StaticScene& scene, int rows, int cols);
   void build_line_pyramid(const cv::Mat& line_mask);
   void index_boxes(double cell_m);
+  std::pair<int, int> cell_of(const Eigen::Vector2d& p) const;  // (col, row), clamped
 
   SemanticClass ground_class_;
   double resolution_m_ = 0.1;
@@ -147,11 +151,12 @@ class SemanticCamera {
   // column, or no ground (row at or above the horizon). Constant because the camera has no
   // roll, so one row of rays meets the ground along a straight line at one depth.
   struct RowGround {
-    bool hits_ground = false;
-    double forward0_m = 0.0, left0_m = 0.0;  // ground point of pixel centre (0, row)
-    double step_forward_m = 0.0, step_left_m = 0.0;
-    double depth_m = 0.0;  // camera depth along the optical axis
-    int line_level = 0;    // line pyramid level for this row's footprint
+    enum class Kind : std::uint8_t { kSky, kBeyondFar, kGround } kind = Kind::kSky;
+    double forward_m = 0.0;  // ground point of pixel centre (0, row), ego frame
+    double left0_m = 0.0;
+    double step_forward_m = 0.0;  // change per column (zero without roll, kept for clarity)
+    double step_left_m = 0.0;
+    int line_level = 0;  // line pyramid level matching this row's lateral footprint
   };
   std::vector<RowGround> rows_;
   mutable std::vector<float> inv_depth_;  // (height * width) scratch 1/z buffer
