@@ -9,10 +9,12 @@
 // a per-pixel lookup in a top-down map costs a few nanoseconds with no per-polygon work at all,
 // so cost does not grow with town size. Drawing ground polygons in perspective each frame
 // would need clipping and a culled polygon set per frame, for the same picture.
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "camera_geometry.h"
 #include "indrive/common/check.h"

@@ -88,7 +88,7 @@ class SceneCache {
   // crosses the 2^l x 2^l block of base cells.
   const cv::Mat& line_level(int level) const { return levels_[level]; }
   int num_levels() const { return static_cast<int>(levels_.size()); }
-  // The pyramid level whose cell size is at most footprint_m (0 for footprints below a cell).
+  // The pyramid level with the smallest cells at least footprint_m wide (0 below one cell).
   int line_level_for(double footprint_m) const;
   double resolution_m() const { return resolution_m_; }
   // World coordinates of the map's north-west corner (min x, max y).
