@@ -4,4 +4,3 @@ indrive_test(camera_scene_cache_test SOURCES camera_scene_cache_test.cc LIBS ind
 indrive_test(bev_test SOURCES bev_test.cc LIBS indrive::envserver)
 indrive_test(video_test SOURCES video_test.cc LIBS indrive::envserver)
 indrive_bench(camera_bench SOURCES camera_bench.cc LIBS indrive::envserver ARGS --frames 3000)
-target_include_directories(camera_bench PRIVATE ${CMAKE_CURRENT_SOURCE_DIR})

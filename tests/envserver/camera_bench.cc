@@ -2,7 +2,7 @@
 // two-lane roads, ~240 buildings) with 20 moving vehicles, at 128x128, 64x64 and 32x32, plus
 // the bird's-eye view; optionally saves a few composed frames as PNG to look at.
 //
-//   camera_bench [--frames N] [--png-dir DIR]
+//   camera_bench [--frames N] [--png-dir DIR] [--video FILE.mp4]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -55,14 +55,16 @@ double percentile(std::vector<double> v, double q) {
 
 int main(int argc, char** argv) {
   int frames = 3000;
-  std::string png_dir;
+  std::string png_dir, video_path;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--frames") && i + 1 < argc)
       frames = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--png-dir") && i + 1 < argc)
       png_dir = argv[++i];
+    else if (!std::strcmp(argv[i], "--video") && i + 1 < argc)
+      video_path = argv[++i];
     else {
-      std::fprintf(stderr, "usage: %s [--frames N] [--png-dir DIR]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--frames N] [--png-dir DIR] [--video FILE.mp4]\n", argv[0]);
       return 2;
     }
   }
@@ -166,6 +168,41 @@ int main(int argc, char** argv) {
       cv::imwrite(path, bgr);
       std::printf("wrote %s\n", path.c_str());
     }
+  }
+  if (!png_dir.empty()) {
+    // The preset sizes side by side, scaled up, to check that lines survive at 64 and 32.
+    const Pose2 ego = ego_at(420);
+    vehicles_at(420, vehicles);
+    std::vector<cv::Mat> panels;
+    for (const int size : {128, 64, 32}) {
+      indrive::env::SemanticCamera camera(indrive::env::CameraConfig{.width = size, .height = size},
+                                          cache);
+      cv::Mat big;
+      cv::resize(indrive::env::colorize(camera.render(ego, vehicles)), big, cv::Size(384, 384), 0,
+                 0, cv::INTER_NEAREST);
+      panels.push_back(big);
+    }
+    cv::Mat row, bgr;
+    cv::hconcat(panels, row);
+    cv::cvtColor(row, bgr, cv::COLOR_RGB2BGR);
+    cv::imwrite(png_dir + "/camera_sizes_128_64_32.png", bgr);
+    std::printf("wrote %s/camera_sizes_128_64_32.png\n", png_dir.c_str());
+  }
+  if (!video_path.empty()) {
+    // 20 s of driving at 10 Hz, camera | bird's-eye view, as the episode videos will look.
+    indrive::env::SemanticCamera camera(indrive::env::CameraConfig{}, cache);
+    indrive::env::BirdsEyeView bev(indrive::env::BevConfig{}, cache);
+    indrive::env::VideoWriter video(video_path, cv::Size(512, 256), 10.0);
+    for (int f = 0; f < 200; ++f) {
+      vehicles_at(f, vehicles);
+      const Pose2 ego = ego_at(f);
+      video.write(indrive::env::compose_frame(
+          indrive::env::colorize(camera.render(ego, vehicles)),
+          bev.render(Box{indrive::env::SemanticClass::kVehicle, ego}, vehicles),
+          std::vector<std::string>{"step " + std::to_string(f)}, 256));
+    }
+    video.close();
+    std::printf("wrote %s (%d frames)\n", video_path.c_str(), video.frames_written());
   }
   return 0;
 }
