@@ -133,6 +133,19 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(checksum));
   }
   {
+    // The same drive without any boxes: the ground pass alone, to show the split.
+    indrive::env::StaticScene flat = scene;
+    flat.boxes.clear();
+    auto flat_cache = std::make_shared<const indrive::env::SceneCache>(flat);
+    indrive::env::SemanticCamera camera(indrive::env::CameraConfig{}, flat_cache);
+    cv::Mat ids;
+    const auto start = Clock::now();
+    for (int f = 0; f < frames; ++f) camera.render(ego_at(f), {}, ids);
+    const double total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+    std::printf("ground128  %10.4f %10s %10s %12.0f   (no boxes, no vehicles)\n", total / frames,
+                "-", "-", 1000.0 * frames / total);
+  }
+  {
     indrive::env::BirdsEyeView bev(indrive::env::BevConfig{}, cache);
     const int bev_frames = std::max(1, frames / 10);
     std::vector<double> times;
