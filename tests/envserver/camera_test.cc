@@ -57,6 +57,17 @@ cv::Mat ray_cast(const CameraConfig& config, const SceneCache& cache, const Pose
       SemanticClass cls = SemanticClass::kSky;
       for (const Box& box : boxes) {
         const double c = std::cos(box.pose.yaw_rad), s = std::sin(box.pose.yaw_rad);
+        // The camera's documented rule: a box wholly beyond the far plane is not drawn.
+        bool beyond_far = true;
+        for (const double along : {-0.5, 0.5})
+          for (const double across : {-0.5, 0.5})
+            for (const double up_m : {0.0, box.height_m}) {
+              const Eigen::Vector3d corner(
+                  box.pose.x_m + c * along * box.length_m - s * across * box.width_m,
+                  box.pose.y_m + s * along * box.length_m + c * across * box.width_m, up_m);
+              beyond_far &= (corner - origin).dot(axis_z) > config.far_m;
+            }
+        if (beyond_far) continue;
         const Eigen::Vector3d o(origin.x() - box.pose.x_m, origin.y() - box.pose.y_m, origin.z());
         const Eigen::Vector3d lo(-0.5 * box.length_m, -0.5 * box.width_m, 0.0);
         const Eigen::Vector3d hi(0.5 * box.length_m, 0.5 * box.width_m, box.height_m);
@@ -313,6 +324,32 @@ TEST(SemanticCameraTest, MatchesBruteForceRayCasterOnRandomScenes) {
         EXPECT_LT(interior_mismatch(got, want), 0.002)
             << "pitch " << pitch << " size " << image << " trial " << trial;
       }
+    }
+  }
+}
+
+TEST(SemanticCameraTest, MatchesBruteForceRayCasterInATownWithStaticBoxes) {
+  // The static boxes come through the grid index and the frustum's bounding rectangle; any box
+  // wrongly dropped there shows up as a mismatch against the ray caster, which sees them all.
+  const StaticScene town = testing::grid_town(3, 3, 80.0, 9);
+  auto cache = std::make_shared<const SceneCache>(town, SceneCacheOptions{.box_grid_cell_m = 16.0});
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> along(0.0, 240.0), yaw(-kPi, kPi);
+  for (const double far : {60.0, 120.0}) {
+    const CameraConfig config{.width = 96, .height = 96, .pitch_deg = 3.0, .far_m = far};
+    SemanticCamera camera(config, cache);
+    for (int trial = 0; trial < 8; ++trial) {
+      // On a road of the grid (x = 80 or y = 80), facing any way.
+      const double s = along(rng);
+      const Pose2 ego =
+          trial % 2 == 0 ? Pose2{s, 80.0 - 1.75, yaw(rng)} : Pose2{80.0 + 1.75, s, yaw(rng)};
+      std::vector<Box> all = town.boxes;
+      const cv::Mat got = camera.render(ego, {});
+      const cv::Mat want = ray_cast(config, *cache, ego, all);
+      EXPECT_LT(interior_mismatch(got, want), 0.002) << "far " << far << " trial " << trial;
+      EXPECT_GT(cv::countNonZero(got == id(SemanticClass::kBuilding)) +
+                    cv::countNonZero(got == id(SemanticClass::kVegetation)),
+                0);
     }
   }
 }
