@@ -25,27 +25,22 @@ namespace {
 namespace fs = std::filesystem;
 
 // Conversion options shared by every network we build: right-hand traffic, no U-turns, no XML
-// validation (SUMO_HOME data may be absent), and node coordinates kept as written. A junction
-// corner radius of 6 m gives right turns of ~7.75 m and left turns of ~11 m on the lane centre,
-// both within reach of the ego's ~7.5 m turning radius at steer 0.3.
+// validation (SUMO_HOME data may be absent), and node coordinates kept as written. The lane
+// centres of netconvert's turns are curves, tightest mid-turn: with a junction corner radius of
+// 10 m no turn is tighter than ~7.6 m, within reach of the ego's ~7.55 m turning radius
+// (wheelbase 2.9 m, wheel angle 0.3 * 70 deg); 6 m would give right turns of ~5.2 m.
+// clang-format off
 const std::vector<std::string> kCommonOptions = {
-    "--xml-validation",
-    "never",
-    "--no-turnarounds",
-    "true",
-    "--default.lanewidth",
-    "3.5",
-    "--default.junctions.radius",
-    "6",
-    "--junctions.corner-detail",
-    "5",
-    "--junctions.internal-link-detail",
-    "8",
-    "--offset.disable-normalization",
-    "true",
-    "--no-warnings",
-    "true",
+    "--xml-validation", "never",
+    "--no-turnarounds", "true",
+    "--default.lanewidth", "3.5",
+    "--default.junctions.radius", "10",
+    "--junctions.corner-detail", "5",
+    "--junctions.internal-link-detail", "8",
+    "--offset.disable-normalization", "true",
+    "--no-warnings", "true",
 };
+// clang-format on
 // Bump when the conversion changes in a way the options above do not show.
 constexpr const char* kCacheVersion = "net-v1";
 
