@@ -9,3 +9,4 @@ indrive_test(envserver_net_test
 target_include_directories(envserver_net_test PRIVATE ${PROJECT_SOURCE_DIR}/envserver/src)
 target_compile_definitions(envserver_net_test PRIVATE
   INDRIVE_NETCONVERT_FOR_TESTS="${NETCONVERT_BINARY}")
+indrive_bench(envserver_net_bench SOURCES net_query_bench.cc LIBS indrive::envserver ARGS town01)
