@@ -18,8 +18,13 @@ constexpr std::string_view kPresetKey = "preset";
 
 std::string format_number(double value) {
   char buffer[64];
-  // Shortest text that reads back to the same double, so the resolved YAML round-trips.
-  auto [end, error] = std::to_chars(buffer, buffer + sizeof(buffer), value);
+  // Shortest text that reads back to the same double, so the resolved YAML round-trips; plain
+  // digits for everyday magnitudes (100000000, not 1e+08).
+  const double magnitude = std::fabs(value);
+  const auto format = (magnitude == 0.0 || (magnitude >= 1e-4 && magnitude < 1e15))
+                          ? std::chars_format::fixed
+                          : std::chars_format::general;
+  auto [end, error] = std::to_chars(buffer, buffer + sizeof(buffer), value, format);
   INDRIVE_CHECK(error == std::errc()) << "to_chars failed";
   return std::string(buffer, end);
 }
@@ -143,10 +148,14 @@ std::vector<double> parse_list_items(const KeySpec& spec, const std::vector<std:
 Value parse_text(const KeySpec& spec, const std::string& raw, std::string_view origin) {
   const std::string text = trim(raw);
   switch (spec.type) {
-    case Type::kInt: return parse_int(spec, text, origin);
-    case Type::kFloat: return parse_float(spec, text, origin);
-    case Type::kBool: return parse_bool(spec, text, origin);
-    case Type::kString: return text;
+    case Type::kInt:
+      return parse_int(spec, text, origin);
+    case Type::kFloat:
+      return parse_float(spec, text, origin);
+    case Type::kBool:
+      return parse_bool(spec, text, origin);
+    case Type::kString:
+      return text;
     case Type::kChoice:
       if (std::find(spec.choices.begin(), spec.choices.end(), text) == spec.choices.end()) {
         fail(origin, spec.key,
@@ -197,7 +206,8 @@ std::string unknown_key_message(const Schema& schema, std::string_view key) {
   for (const auto& [name, spec] : schema.keys()) {
     if (name.rfind(group + ".", 0) == 0) siblings.push_back(name);
   }
-  if (!siblings.empty()) return message + "; keys under '" + group + ".' are: " + join(siblings, ", ");
+  if (!siblings.empty())
+    return message + "; keys under '" + group + ".' are: " + join(siblings, ", ");
   return message + "; no key starts with '" + group + "' (see --help for the list)";
 }
 
@@ -211,12 +221,18 @@ std::string node_origin(std::string_view origin, const YAML::Node& node) {
 
 std::string_view type_name(Type type) {
   switch (type) {
-    case Type::kInt: return "integer";
-    case Type::kFloat: return "number";
-    case Type::kBool: return "boolean";
-    case Type::kString: return "string";
-    case Type::kChoice: return "choice";
-    case Type::kNumberList: return "list of numbers";
+    case Type::kInt:
+      return "integer";
+    case Type::kFloat:
+      return "number";
+    case Type::kBool:
+      return "boolean";
+    case Type::kString:
+      return "string";
+    case Type::kChoice:
+      return "choice";
+    case Type::kNumberList:
+      return "list of numbers";
   }
   return "unknown";
 }
@@ -241,43 +257,60 @@ Schema& Schema::add(KeySpec spec) {
 Schema& Schema::add_int(std::string key, std::int64_t default_value, std::string doc,
                         std::int64_t min, std::int64_t max) {
   INDRIVE_CHECK(min <= default_value && default_value <= max) << "default of '" << key << "'";
-  return add({.key = std::move(key), .type = Type::kInt, .default_value = default_value,
-              .min = static_cast<double>(min), .max = static_cast<double>(max), .doc = std::move(doc)});
+  return add({.key = std::move(key),
+              .type = Type::kInt,
+              .default_value = default_value,
+              .min = static_cast<double>(min),
+              .max = static_cast<double>(max),
+              .doc = std::move(doc)});
 }
 
 Schema& Schema::add_float(std::string key, double default_value, std::string doc, double min,
                           double max) {
   INDRIVE_CHECK(min <= default_value && default_value <= max) << "default of '" << key << "'";
-  return add({.key = std::move(key), .type = Type::kFloat, .default_value = default_value,
-              .min = min, .max = max, .doc = std::move(doc)});
+  return add({.key = std::move(key),
+              .type = Type::kFloat,
+              .default_value = default_value,
+              .min = min,
+              .max = max,
+              .doc = std::move(doc)});
 }
 
 Schema& Schema::add_bool(std::string key, bool default_value, std::string doc) {
-  return add({.key = std::move(key), .type = Type::kBool, .default_value = default_value,
+  return add({.key = std::move(key),
+              .type = Type::kBool,
+              .default_value = default_value,
               .doc = std::move(doc)});
 }
 
 Schema& Schema::add_string(std::string key, std::string default_value, std::string doc) {
-  return add({.key = std::move(key), .type = Type::kString,
-              .default_value = std::move(default_value), .doc = std::move(doc)});
+  return add({.key = std::move(key),
+              .type = Type::kString,
+              .default_value = std::move(default_value),
+              .doc = std::move(doc)});
 }
 
 Schema& Schema::add_choice(std::string key, std::string default_value,
                            std::vector<std::string> choices, std::string doc) {
   INDRIVE_CHECK(std::find(choices.begin(), choices.end(), default_value) != choices.end())
       << "default of '" << key << "' is not one of its choices";
-  return add({.key = std::move(key), .type = Type::kChoice,
-              .default_value = std::move(default_value), .choices = std::move(choices),
+  return add({.key = std::move(key),
+              .type = Type::kChoice,
+              .default_value = std::move(default_value),
+              .choices = std::move(choices),
               .doc = std::move(doc)});
 }
 
-Schema& Schema::add_number_list(std::string key, std::vector<double> default_value,
-                                std::string doc, double min, double max) {
+Schema& Schema::add_number_list(std::string key, std::vector<double> default_value, std::string doc,
+                                double min, double max) {
   for (double value : default_value) {
     INDRIVE_CHECK(min <= value && value <= max) << "default of '" << key << "'";
   }
-  return add({.key = std::move(key), .type = Type::kNumberList,
-              .default_value = std::move(default_value), .min = min, .max = max,
+  return add({.key = std::move(key),
+              .type = Type::kNumberList,
+              .default_value = std::move(default_value),
+              .min = min,
+              .max = max,
               .doc = std::move(doc)});
 }
 
@@ -399,8 +432,7 @@ void Config::apply_preset(std::string_view name, std::string_view origin) {
   preset_ = preset->name;
 }
 
-void Config::apply_yaml(std::string_view yaml_text, std::string_view origin,
-                        bool skip_preset_key) {
+void Config::apply_yaml(std::string_view yaml_text, std::string_view origin, bool skip_preset_key) {
   YAML::Node root;
   try {
     root = YAML::Load(std::string(yaml_text));
@@ -426,8 +458,8 @@ void Config::apply_yaml(std::string_view yaml_text, std::string_view origin,
       const KeySpec* spec = schema_->find(name);
       if (value.IsMap()) {
         if (spec != nullptr) {
-          fail(where, name, "expected a " + std::string(type_name(spec->type)) +
-                                ", got a map of sub-keys");
+          fail(where, name,
+               "expected a " + std::string(type_name(spec->type)) + ", got a map of sub-keys");
         }
         self(self, value, name + ".");
         continue;
@@ -464,8 +496,9 @@ void Config::apply_override(std::string_view assignment) {
   const std::string origin = "--set " + std::string(assignment);
   const auto eq = assignment.find('=');
   if (eq == std::string_view::npos) {
-    throw ConfigError(origin + ": malformed override; write --set key=value, e.g. "
-                               "--set replay.capacity=1000");
+    throw ConfigError(origin +
+                      ": malformed override; write --set key=value, e.g. "
+                      "--set replay.capacity=1000");
   }
   const std::string key = trim(assignment.substr(0, eq));
   if (key.empty()) {

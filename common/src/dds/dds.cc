@@ -1,9 +1,8 @@
 #include "indrive/common/dds.h"
 
+#include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/log/Log.hpp>
-
-#include <cstdlib>
 #include <thread>
 
 #include "indrive/common/config.h"
@@ -43,8 +42,7 @@ void route_fastdds_log() {
 }
 
 void declare_config(config::Schema& schema) {
-  schema
-      .add_int("dds.domain_id", 0, "DDS domain of the run; processes of one run share it", 0, 232)
+  schema.add_int("dds.domain_id", 0, "DDS domain of the run; processes of one run share it", 0, 232)
       .add_string("dds.profiles_file", "",
                   "XML profiles file (deploy/dds/*.xml); empty: FASTRTPS_DEFAULT_PROFILES_FILE")
       .add_string("dds.participant_profile", "indrive_participant",
@@ -74,8 +72,7 @@ std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
 }
 
 Participant::Participant(const ParticipantOptions& options)
-    : profiles_file_(resolve_profiles_file(options.profiles_file)),
-      domain_id_(options.domain_id) {
+    : profiles_file_(resolve_profiles_file(options.profiles_file)), domain_id_(options.domain_id) {
   route_fastdds_log();
   if (domain_id_ < 0 || domain_id_ > 232) {
     throw DdsError("DDS domain id " + std::to_string(domain_id_) +
@@ -138,8 +135,8 @@ eprosima::fastdds::dds::Topic* Participant::find_or_create_topic(
   return created;
 }
 
-eprosima::fastdds::dds::DataWriter* Participant::create_writer(
-    eprosima::fastdds::dds::Topic* topic, const std::string& profile) {
+eprosima::fastdds::dds::DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic,
+                                                               const std::string& profile) {
   eprosima::fastdds::dds::DataWriterQos qos;
   if (publisher_->get_datawriter_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
     throw DdsError("DDS profiles file '" + profiles_file_.string() +

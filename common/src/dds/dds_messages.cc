@@ -21,7 +21,8 @@ class ChecksumBuilder {
     static_assert(std::is_integral_v<Int> || std::is_enum_v<Int>);
     std::uint8_t bytes[sizeof(Int)];
     auto raw = static_cast<std::uint64_t>(value);
-    for (std::size_t i = 0; i < sizeof(Int); ++i) bytes[i] = static_cast<std::uint8_t>(raw >> (8 * i));
+    for (std::size_t i = 0; i < sizeof(Int); ++i)
+      bytes[i] = static_cast<std::uint8_t>(raw >> (8 * i));
     crc_ = crc32(bytes, sizeof(Int), crc_);
   }
   void floating(double value) { integer(std::bit_cast<std::uint64_t>(value)); }
@@ -64,8 +65,7 @@ DropReason check_header(std::uint16_t schema_version, const std::string& run_id,
 
 struct ZstdContexts {
   std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> compress{ZSTD_createCCtx(), ZSTD_freeCCtx};
-  std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> decompress{ZSTD_createDCtx(),
-                                                                   ZSTD_freeDCtx};
+  std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> decompress{ZSTD_createDCtx(), ZSTD_freeDCtx};
 };
 
 // One context pair per thread: creating them per call costs more than compressing a chunk.
@@ -78,11 +78,16 @@ ZstdContexts& zstd_contexts() {
 
 std::string_view drop_reason_name(DropReason reason) {
   switch (reason) {
-    case DropReason::kOk: return "accepted";
-    case DropReason::kWrongSchema: return "wrong_schema";
-    case DropReason::kWrongRun: return "wrong_run";
-    case DropReason::kBadShape: return "bad_shape";
-    case DropReason::kBadChecksum: return "bad_checksum";
+    case DropReason::kOk:
+      return "accepted";
+    case DropReason::kWrongSchema:
+      return "wrong_schema";
+    case DropReason::kWrongRun:
+      return "wrong_run";
+    case DropReason::kBadShape:
+      return "bad_shape";
+    case DropReason::kBadChecksum:
+      return "bad_checksum";
   }
   return "unknown";
 }
@@ -234,8 +239,8 @@ DropReason validate(const msg::Heartbeat& heartbeat, std::string_view expected_r
 
 std::vector<std::uint8_t> compress_frames(std::span<const std::uint8_t> frames, int level) {
   std::vector<std::uint8_t> out(ZSTD_compressBound(frames.size()));
-  const std::size_t size = ZSTD_compressCCtx(zstd_contexts().compress.get(), out.data(),
-                                             out.size(), frames.data(), frames.size(), level);
+  const std::size_t size = ZSTD_compressCCtx(zstd_contexts().compress.get(), out.data(), out.size(),
+                                             frames.data(), frames.size(), level);
   // Compression into a buffer of compressBound size cannot fail on valid input.
   if (ZSTD_isError(size)) {
     throw DataError(std::string("zstd compression failed: ") + ZSTD_getErrorName(size));
@@ -268,8 +273,8 @@ std::vector<std::uint8_t> decompress_frames(std::span<const std::uint8_t> compre
 }
 
 std::vector<std::uint8_t> decompress_frames(const msg::TrajectoryChunk& chunk) {
-  const std::size_t expected = static_cast<std::size_t>(chunk.num_steps()) * chunk.image_height() *
-                               chunk.image_width();
+  const std::size_t expected =
+      static_cast<std::size_t>(chunk.num_steps()) * chunk.image_height() * chunk.image_width();
   return decompress_frames(chunk.frames_zstd(), expected);
 }
 

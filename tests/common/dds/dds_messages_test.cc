@@ -136,8 +136,8 @@ TEST(DdsMessages, CorruptFramesThrowDataError) {
 TEST(DdsMessages, ChunkSurvivesCdrSerialization) {
   const auto chunk = make_synthetic_chunk("run-a", 1, 2);
   msg::TrajectoryChunkPubSubType type;
-  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.getSerializedSizeProvider(
-      const_cast<msg::TrajectoryChunk*>(&chunk))());
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(
+      type.getSerializedSizeProvider(const_cast<msg::TrajectoryChunk*>(&chunk))());
   ASSERT_TRUE(type.serialize(const_cast<msg::TrajectoryChunk*>(&chunk), &payload));
   msg::TrajectoryChunk decoded;
   ASSERT_TRUE(type.deserialize(&payload, &decoded));

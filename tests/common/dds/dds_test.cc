@@ -40,8 +40,8 @@ TEST(DdsParticipant, ProfilesFileComesFromEnvironmentWhenNoFlag) {
   EXPECT_NE(message.find("FASTRTPS_DEFAULT_PROFILES_FILE"), std::string::npos) << message;
   ::setenv(kProfilesEnvVar, profiles().c_str(), 1);
   EXPECT_EQ(resolve_profiles_file("").string(), profiles());
-  EXPECT_EQ(resolve_profiles_file("/other.xml" + std::string()).string().empty(), false)
-      << "explicit path wins";
+  const std::string other = testing::source_path("deploy/dds/default.xml").string();
+  EXPECT_EQ(resolve_profiles_file(other).string(), other) << "an explicit path wins";
   ::unsetenv(kProfilesEnvVar);
 }
 
@@ -57,8 +57,7 @@ TEST(DdsParticipant, UnknownProfilesAreNamed) {
   const auto participant_message = error_of([] {
     Participant participant({.profiles_file = profiles(), .participant_profile = "no_such"});
   });
-  EXPECT_NE(participant_message.find("no <participant> profile named 'no_such'"),
-            std::string::npos)
+  EXPECT_NE(participant_message.find("no <participant> profile named 'no_such'"), std::string::npos)
       << participant_message;
 
   Participant participant({.domain_id = testing::unique_domain_id(), .profiles_file = profiles()});
@@ -66,9 +65,8 @@ TEST(DdsParticipant, UnknownProfilesAreNamed) {
       [&] { participant.make_writer<msg::StepAllowance>("indrive/allowance", "no_writer"); });
   EXPECT_NE(writer_message.find("no <data_writer> profile named 'no_writer'"), std::string::npos)
       << writer_message;
-  const auto domain_message = error_of([] {
-    Participant participant({.domain_id = 300, .profiles_file = profiles()});
-  });
+  const auto domain_message =
+      error_of([] { Participant participant({.domain_id = 300, .profiles_file = profiles()}); });
   EXPECT_NE(domain_message.find("0..232"), std::string::npos) << domain_message;
 }
 
@@ -108,7 +106,8 @@ TEST(DdsParticipant, ThrowingCallbackIsCountedNotPropagated) {
   msg::EpisodeResult result;
   seal(result);
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(writer->write(result));
-  for (int i = 0; i < 500 && reader->callback_failures() < 3; ++i) std::this_thread::sleep_for(10ms);
+  for (int i = 0; i < 500 && reader->callback_failures() < 3; ++i)
+    std::this_thread::sleep_for(10ms);
   EXPECT_EQ(reader->callback_failures(), 3u);
 }
 

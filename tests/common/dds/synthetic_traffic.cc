@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cstring>
+#include <map>
+#include <mutex>
+#include <tuple>
 
 namespace indrive::testing {
 namespace {
@@ -32,14 +35,12 @@ void render_synthetic_frame(std::uint64_t episode, std::uint64_t step, int heigh
   const int horizon = height * (35 + static_cast<int>(scene % 10)) / 100;
   const int center = width / 2 + static_cast<int>((mix(episode * 31 + step / 16) % 9)) - 4;
   // Sky and a skyline of buildings whose heights depend on the episode and scroll with steps.
-  for (int y = 0; y < horizon; ++y) {
-    std::uint8_t* row = out + static_cast<std::size_t>(y) * width;
-    for (int x = 0; x < width; ++x) {
-      const std::uint64_t block = (static_cast<std::uint64_t>(x) + step) / 12;
-      const int top = horizon - static_cast<int>(mix(scene ^ block) % (horizon + 1));
-      const bool tree = mix(scene + block) % 5 == 0;
-      row[x] = y >= top ? (tree ? kVegetation : kBuilding) : kSky;
-    }
+  for (int x = 0; x < width; ++x) {
+    const std::uint64_t block = (static_cast<std::uint64_t>(x) + step) / 12;
+    const int top = horizon - static_cast<int>(mix(scene ^ block) % (horizon + 1));
+    const std::uint8_t solid = mix(scene + block) % 5 == 0 ? kVegetation : kBuilding;
+    for (int y = 0; y < horizon; ++y)
+      out[static_cast<std::size_t>(y) * width + x] = y >= top ? solid : kSky;
   }
   // Road widening toward the bottom, sidewalks beside it, a dashed centre line.
   for (int y = horizon; y < height; ++y) {
@@ -71,25 +72,54 @@ void render_synthetic_frame(std::uint64_t episode, std::uint64_t step, int heigh
   }
 }
 
+namespace {
+
+// Rendered and compressed frames of one clip, shared by every chunk that shows it.
+struct Clip {
+  std::vector<std::uint8_t> frames;
+  std::vector<std::uint8_t> compressed;
+};
+
+// Frames repeat every kDistinctClips chunks, so generating and checking a thousand chunks
+// costs a few dozen renders; ids, actions, events and checksums still differ per chunk.
+constexpr std::uint64_t kDistinctClips = 24;
+
+const Clip& clip_for(std::uint64_t chunk_seq, int num_steps, int height, int width) {
+  static std::mutex mutex;
+  static std::map<std::tuple<std::uint64_t, int, int, int>, Clip> cache;
+  const auto key = std::make_tuple(chunk_seq % kDistinctClips, num_steps, height, width);
+  std::lock_guard<std::mutex> lock(mutex);
+  auto it = cache.find(key);
+  if (it == cache.end()) {
+    const std::uint64_t seq = std::get<0>(key);
+    const std::uint64_t episode = seq * num_steps / kStepsPerEpisode;
+    const std::uint64_t first_step = seq * num_steps % kStepsPerEpisode;
+    const std::size_t frame_size = static_cast<std::size_t>(height) * width;
+    Clip clip;
+    clip.frames.resize(frame_size * num_steps);
+    for (int t = 0; t < num_steps; ++t) {
+      render_synthetic_frame(episode, first_step + t, height, width,
+                             clip.frames.data() + t * frame_size);
+    }
+    clip.compressed = dds::compress_frames(clip.frames);
+    it = cache.emplace(key, std::move(clip)).first;
+  }
+  return it->second;
+}
+
+}  // namespace
+
 std::vector<std::uint8_t> synthetic_frames(std::uint64_t chunk_seq, int num_steps, int height,
                                            int width) {
-  const std::uint64_t episode = chunk_seq * num_steps / kStepsPerEpisode;
-  const std::uint64_t first_step = chunk_seq * num_steps % kStepsPerEpisode;
-  const std::size_t frame_size = static_cast<std::size_t>(height) * width;
-  std::vector<std::uint8_t> frames(frame_size * num_steps);
-  for (int t = 0; t < num_steps; ++t) {
-    render_synthetic_frame(episode, first_step + t, height, width, frames.data() + t * frame_size);
-  }
-  return frames;
+  return clip_for(chunk_seq, num_steps, height, width).frames;
 }
 
 namespace {
 
 // Every field of a synthetic chunk except the frames and the checksum.
 msg::TrajectoryChunk synthetic_chunk_without_frames(const std::string& run_id,
-                                                    std::uint32_t actor_id,
-                                                    std::uint64_t chunk_seq, int num_steps,
-                                                    int height, int width) {
+                                                    std::uint32_t actor_id, std::uint64_t chunk_seq,
+                                                    int num_steps, int height, int width) {
   msg::TrajectoryChunk chunk;
   chunk.run_id(run_id);
   chunk.actor_id(actor_id);
@@ -124,7 +154,7 @@ msg::TrajectoryChunk make_synthetic_chunk(const std::string& run_id, std::uint32
                                           int width) {
   msg::TrajectoryChunk chunk =
       synthetic_chunk_without_frames(run_id, actor_id, chunk_seq, num_steps, height, width);
-  chunk.frames_zstd(dds::compress_frames(synthetic_frames(chunk_seq, num_steps, height, width)));
+  chunk.frames_zstd(clip_for(chunk_seq, num_steps, height, width).compressed);
   dds::seal(chunk);
   return chunk;
 }
@@ -152,12 +182,12 @@ msg::PolicySnapshot make_synthetic_snapshot(const std::string& run_id, std::uint
 }
 
 std::string compare_with_synthetic(const msg::TrajectoryChunk& chunk) {
-  const msg::TrajectoryChunk expected = synthetic_chunk_without_frames(
-      chunk.run_id(), chunk.actor_id(), chunk.chunk_seq(), chunk.num_steps(),
-                           chunk.image_height(), chunk.image_width());
+  const msg::TrajectoryChunk expected =
+      synthetic_chunk_without_frames(chunk.run_id(), chunk.actor_id(), chunk.chunk_seq(),
+                                     chunk.num_steps(), chunk.image_height(), chunk.image_width());
   if (dds::decompress_frames(chunk) !=
-      synthetic_frames(chunk.chunk_seq(), chunk.num_steps(), chunk.image_height(),
-                       chunk.image_width())) {
+      clip_for(chunk.chunk_seq(), chunk.num_steps(), chunk.image_height(), chunk.image_width())
+          .frames) {
     return "frames differ";
   }
   if (chunk.actions() != expected.actions()) return "actions differ";

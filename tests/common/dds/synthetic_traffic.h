@@ -16,7 +16,8 @@ namespace indrive::testing {
 void render_synthetic_frame(std::uint64_t episode, std::uint64_t step, int height, int width,
                             std::uint8_t* out);
 
-// The frames of chunk `chunk_seq`: (num_steps, height, width) uint8.
+// The frames of chunk `chunk_seq`: (num_steps, height, width) uint8. Frames repeat every 24
+// chunks (rendered once and cached) to keep a thousand chunks cheap to generate and check.
 std::vector<std::uint8_t> synthetic_frames(std::uint64_t chunk_seq, int num_steps, int height,
                                            int width);
 

@@ -109,9 +109,9 @@ class Schema {
 
 // Where a configuration comes from, applied in this order after the schema defaults.
 struct Sources {
-  std::string preset;                   // empty: the file's or --set's `preset`, if any
-  std::filesystem::path file;           // YAML file; empty: none
-  std::vector<std::string> overrides;   // "a.b=c" each, from --set
+  std::string preset{};                  // empty: the file's or --set's `preset`, if any
+  std::filesystem::path file{};          // YAML file; empty: none
+  std::vector<std::string> overrides{};  // "a.b=c" each, from --set
 };
 
 // A fully resolved configuration: one value for every key of its schema.

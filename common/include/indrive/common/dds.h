@@ -16,14 +16,6 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
-#include <filesystem>
-#include <functional>
-#include <map>
-#include <memory>
-#include <mutex>
-#include <stdexcept>
-#include <string>
-
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/publisher/DataWriter.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
@@ -33,6 +25,13 @@
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <stdexcept>
+#include <string>
 
 #include "indrive/common/dds_messages.h"
 #include "indrive/common/log.h"
@@ -55,7 +54,7 @@ inline constexpr const char* kProfilesEnvVar = "FASTRTPS_DEFAULT_PROFILES_FILE";
 struct ParticipantOptions {
   int domain_id = 0;
   // XML profiles file; empty means the file named by FASTRTPS_DEFAULT_PROFILES_FILE.
-  std::string profiles_file;
+  std::string profiles_file{};
   // <participant> profile in that file.
   std::string participant_profile = "indrive_participant";
 };
@@ -156,8 +155,9 @@ class Reader : public eprosima::fastdds::dds::DataReaderListener {
         callback_(sample_);
       } catch (const std::exception& error) {
         callback_failures_.fetch_add(1);
-        INDRIVE_LOG(kError, "dds") << "reader callback failed on " << reader->get_topicdescription()->get_name()
-                                   << ": " << error.what();
+        INDRIVE_LOG(kError, "dds")
+            << "reader callback failed on " << reader->get_topicdescription()->get_name() << ": "
+            << error.what();
       }
     }
   }
@@ -189,9 +189,9 @@ class Participant {
 
   // Creates a writer on `topic` with the QoS of the XML <data_writer> profile `profile`.
   template <typename T>
-  std::unique_ptr<Writer<T>> make_writer(const std::string& topic = TopicTraits<T>::kTopic,
-                                         const std::string& profile =
-                                             TopicTraits<T>::kWriterProfile) {
+  std::unique_ptr<Writer<T>> make_writer(
+      const std::string& topic = TopicTraits<T>::kTopic,
+      const std::string& profile = TopicTraits<T>::kWriterProfile) {
     auto* topic_entity = find_or_create_topic<T>(topic);
     return std::make_unique<Writer<T>>(publisher_, create_writer(topic_entity, profile));
   }
@@ -199,10 +199,9 @@ class Participant {
   // Creates a reader on `topic` with the QoS of the XML <data_reader> profile `profile`;
   // on_sample is called for every sample taken.
   template <typename T>
-  std::unique_ptr<Reader<T>> make_reader(typename Reader<T>::Callback on_sample,
-                                         const std::string& topic = TopicTraits<T>::kTopic,
-                                         const std::string& profile =
-                                             TopicTraits<T>::kReaderProfile) {
+  std::unique_ptr<Reader<T>> make_reader(
+      typename Reader<T>::Callback on_sample, const std::string& topic = TopicTraits<T>::kTopic,
+      const std::string& profile = TopicTraits<T>::kReaderProfile) {
     auto* topic_entity = find_or_create_topic<T>(topic);
     auto reader = std::make_unique<Reader<T>>(std::move(on_sample));
     reader->attach(subscriber_, create_reader(topic_entity, profile, reader.get()));

@@ -112,13 +112,13 @@ std::vector<std::uint8_t> decompress_frames(const msg::TrajectoryChunk& chunk);
 template <typename T>
 struct TopicTraits;
 
-#define INDRIVE_DDS_TOPIC(Type, topic, profile)                                  \
-  template <>                                                                    \
-  struct TopicTraits<msg::Type> {                                                \
-    using PubSubType = msg::Type##PubSubType;                                    \
-    static constexpr const char* kTopic = topic;                                 \
-    static constexpr const char* kWriterProfile = profile "_writer";             \
-    static constexpr const char* kReaderProfile = profile "_reader";             \
+#define INDRIVE_DDS_TOPIC(Type, topic, profile)                      \
+  template <>                                                        \
+  struct TopicTraits<msg::Type> {                                    \
+    using PubSubType = msg::Type##PubSubType;                        \
+    static constexpr const char* kTopic = topic;                     \
+    static constexpr const char* kWriterProfile = profile "_writer"; \
+    static constexpr const char* kReaderProfile = profile "_reader"; \
   };
 
 INDRIVE_DDS_TOPIC(TrajectoryChunk, "indrive/trajectory", "trajectory")
