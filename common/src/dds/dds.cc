@@ -49,6 +49,12 @@ void declare_config(config::Schema& schema) {
                   "<participant> profile in the XML profiles file");
 }
 
+ParticipantOptions participant_options(const config::Config& config) {
+  return {.domain_id = config.get<int>("dds.domain_id"),
+          .profiles_file = config.get<std::string>("dds.profiles_file"),
+          .participant_profile = config.get<std::string>("dds.participant_profile")};
+}
+
 std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
   std::string path = explicit_path;
   std::string source = "the dds-profiles argument";

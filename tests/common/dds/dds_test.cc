@@ -15,7 +15,7 @@ using namespace std::chrono_literals;
 
 // Every test here loads the same profiles file: Fast DDS keeps loaded profiles per process,
 // and two files that define the same profile names cannot both be loaded in one process.
-std::string profiles() { return testing::source_path("deploy/dds/single_host.xml").string(); }
+std::string profiles() { return testing::source_path("deploy/dds/default.xml").string(); }
 
 template <typename F>
 std::string error_of(F&& make) {
@@ -40,7 +40,7 @@ TEST(DdsParticipant, ProfilesFileComesFromEnvironmentWhenNoFlag) {
   EXPECT_NE(message.find("FASTRTPS_DEFAULT_PROFILES_FILE"), std::string::npos) << message;
   ::setenv(kProfilesEnvVar, profiles().c_str(), 1);
   EXPECT_EQ(resolve_profiles_file("").string(), profiles());
-  const std::string other = testing::source_path("deploy/dds/default.xml").string();
+  const std::string other = testing::source_path("deploy/dds/single_host.xml").string();
   EXPECT_EQ(resolve_profiles_file(other).string(), other) << "an explicit path wins";
   ::unsetenv(kProfilesEnvVar);
 }

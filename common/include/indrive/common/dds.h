@@ -37,8 +37,9 @@
 #include "indrive/common/log.h"
 
 namespace indrive::config {
+class Config;
 class Schema;
-}
+}  // namespace indrive::config
 
 namespace indrive::dds {
 
@@ -61,6 +62,14 @@ struct ParticipantOptions {
 
 // Declares the dds.* configuration keys (domain_id, profiles_file, participant_profile).
 void declare_config(config::Schema& schema);
+
+// Participant options from the dds.* keys of a resolved config.
+ParticipantOptions participant_options(const config::Config& config);
+
+// The command-line flag that names the profiles file, as an alias of dds.profiles_file for
+// config::parse_command_line.
+inline const std::pair<std::string, std::string> kProfilesFlag{"--dds-profiles",
+                                                               "dds.profiles_file"};
 
 // Returns the profiles file to load: explicit_path if not empty, else the environment
 // variable's value; throws DdsError when neither is set or the file does not exist.
