@@ -70,6 +70,21 @@ TEST(DdsParticipant, UnknownProfilesAreNamed) {
   EXPECT_NE(domain_message.find("0..232"), std::string::npos) << domain_message;
 }
 
+TEST(DdsParticipant, SecondProfilesFileInOneProcessIsRefused) {
+  Participant first({.domain_id = testing::unique_domain_id(), .profiles_file = profiles()});
+  const auto message = error_of([] {
+    Participant second({.profiles_file = testing::source_path("deploy/dds/single_host.xml")});
+  });
+  EXPECT_NE(message.find("already uses DDS profiles from"), std::string::npos) << message;
+
+  // Fast DDS loads the environment's file by itself: a different explicit file is refused too.
+  ::setenv(kProfilesEnvVar, testing::source_path("deploy/dds/single_host.xml").c_str(), 1);
+  const auto env_message = error_of([] { Participant third({.profiles_file = profiles()}); });
+  ::unsetenv(kProfilesEnvVar);
+  EXPECT_NE(env_message.find("FASTRTPS_DEFAULT_PROFILES_FILE names"), std::string::npos)
+      << env_message;
+}
+
 TEST(DdsParticipant, LateReaderGetsTransientLocalAllowance) {
   const int domain = testing::unique_domain_id();
   Participant learner({.domain_id = domain, .profiles_file = profiles()});
