@@ -88,8 +88,8 @@ class Writer {
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
-  // Publishes one sample; returns false when it could not be queued in time (a KEEP_ALL
-  // history stayed full for the profile's max_blocking_time), so the caller may retry.
+  // Publishes one sample; returns false when it could not be queued, e.g. a KEEP_ALL history
+  // is full because readers have not acknowledged enough yet (back-pressure): retry later.
   bool write(const T& sample) { return writer_->write(const_cast<T*>(&sample)); }
 
   // Number of readers currently matched.
