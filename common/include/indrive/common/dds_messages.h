@@ -86,6 +86,10 @@ void seal(msg::StepAllowance& allowance);
 void seal(msg::EpisodeResult& result);
 void seal(msg::Heartbeat& heartbeat);
 
+// The sealed announcement of `snapshot` (run, version, checksum, params size), which the
+// learner repeats so that late joiners notice a snapshot they missed.
+msg::SnapshotAnnounce announce_for(const msg::PolicySnapshot& snapshot);
+
 // Checks schema version, run id, shape and checksum, in that order, and returns the first
 // failure. An empty expected_run_id accepts any run (for tools that watch every run).
 DropReason validate(const msg::TrajectoryChunk& chunk, std::string_view expected_run_id);
