@@ -21,15 +21,15 @@
 #include <string_view>
 #include <vector>
 
-#include "common.h"
-#include "control.h"
-#include "controlPubSubTypes.h"
-#include "evaluation.h"
-#include "evaluationPubSubTypes.h"
-#include "policy.h"
-#include "policyPubSubTypes.h"
-#include "trajectory.h"
-#include "trajectoryPubSubTypes.h"
+#include "indrive/msg/common.h"
+#include "indrive/msg/control.h"
+#include "indrive/msg/controlPubSubTypes.h"
+#include "indrive/msg/evaluation.h"
+#include "indrive/msg/evaluationPubSubTypes.h"
+#include "indrive/msg/policy.h"
+#include "indrive/msg/policyPubSubTypes.h"
+#include "indrive/msg/trajectory.h"
+#include "indrive/msg/trajectoryPubSubTypes.h"
 
 namespace indrive::dds {
 
