@@ -33,9 +33,6 @@ class CheckFailure {
   } else                         \
     ::indrive::detail::CheckFailure(__FILE__, __LINE__, #condition)
 
-#define INDRIVE_CHECK_EQ(a, b) \
-  INDRIVE_CHECK((a) == (b)) << #a " = " << (a) << ", " #b " = " << (b) << ": "
-#define INDRIVE_CHECK_LT(a, b) \
-  INDRIVE_CHECK((a) < (b)) << #a " = " << (a) << ", " #b " = " << (b) << ": "
-#define INDRIVE_CHECK_LE(a, b) \
-  INDRIVE_CHECK((a) <= (b)) << #a " = " << (a) << ", " #b " = " << (b) << ": "
+#define INDRIVE_CHECK_EQ(a, b) INDRIVE_CHECK((a) == (b)) << #a " = " << (a) << ", " #b " = " << (b) << ": "
+#define INDRIVE_CHECK_LT(a, b) INDRIVE_CHECK((a) < (b)) << #a " = " << (a) << ", " #b " = " << (b) << ": "
+#define INDRIVE_CHECK_LE(a, b) INDRIVE_CHECK((a) <= (b)) << #a " = " << (a) << ", " #b " = " << (b) << ": "

@@ -63,7 +63,7 @@ class Line {
 
 }  // namespace indrive::log
 
-#define INDRIVE_LOG(severity, category)                            \
-  if (::indrive::log::Level::severity < ::indrive::log::level()) { \
-  } else                                                           \
+#define INDRIVE_LOG(severity, category)                                     \
+  if (::indrive::log::Level::severity < ::indrive::log::level()) {            \
+  } else                                                                      \
     ::indrive::log::Line(::indrive::log::Level::severity, category, __FILE__, __LINE__)
