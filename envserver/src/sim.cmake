@@ -1,6 +1,7 @@
 # Sources of the envserver sim area (added to indrive_envserver): SUMO connection, ego,
 # traffic, events, the environment loop; and the indrive-env tool.
 target_sources(indrive_envserver PRIVATE
+  ${CMAKE_CURRENT_LIST_DIR}/ego.cc
   ${CMAKE_CURRENT_LIST_DIR}/sumo_connection.cc
   ${CMAKE_CURRENT_LIST_DIR}/sumo_libsumo.cc
   ${CMAKE_CURRENT_LIST_DIR}/sumo_libtraci.cc

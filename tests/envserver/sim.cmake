@@ -7,3 +7,4 @@ target_compile_definitions(indrive_sim_test_net PRIVATE
 
 indrive_test(sumo_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/sumo_test.cc
   LIBS indrive::envserver indrive_sim_test_net)
+indrive_test(ego_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/ego_test.cc LIBS indrive::envserver)
