@@ -2,7 +2,10 @@
 # traffic, events, the environment loop; and the indrive-env tool.
 target_sources(indrive_envserver PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/ego.cc
+  ${CMAKE_CURRENT_LIST_DIR}/env.cc
+  ${CMAKE_CURRENT_LIST_DIR}/events.cc
   ${CMAKE_CURRENT_LIST_DIR}/sumo_connection.cc
   ${CMAKE_CURRENT_LIST_DIR}/sumo_libsumo.cc
   ${CMAKE_CURRENT_LIST_DIR}/sumo_libtraci.cc
+  ${CMAKE_CURRENT_LIST_DIR}/traffic.cc
 )
