@@ -8,3 +8,8 @@ target_compile_definitions(indrive_sim_test_net PRIVATE
 indrive_test(sumo_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/sumo_test.cc
   LIBS indrive::envserver indrive_sim_test_net)
 indrive_test(ego_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/ego_test.cc LIBS indrive::envserver)
+indrive_test(events_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/events_test.cc
+  LIBS indrive::envserver indrive_sim_test_net)
+indrive_test(env_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/env_test.cc LIBS indrive::envserver)
+indrive_test(follower_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/follower_test.cc
+  LIBS indrive::envserver LABEL smoke TIMEOUT 600)
