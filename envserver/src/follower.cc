@@ -27,8 +27,8 @@ int WaypointFollower::act(const EgoState& ego) {
 
   // Pure pursuit: the arc through the look-ahead point tangent to the heading has curvature
   // 2 * lateral / distance^2, lateral measured in the ego frame.
-  const double lookahead = std::clamp(config_.lookahead_s * ego.speed_mps,
-                                      config_.min_lookahead_m, config_.max_lookahead_m);
+  const double lookahead = std::clamp(config_.lookahead_s * ego.speed_mps, config_.min_lookahead_m,
+                                      config_.max_lookahead_m);
   const Pose2 target = route_->pose_at(s_m_ + lookahead);
   const double dx = target.x_m - ego.pose.x_m;
   const double dy = target.y_m - ego.pose.y_m;

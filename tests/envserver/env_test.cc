@@ -126,21 +126,6 @@ TEST(Env, CirclingLeftLeavesTheLane) {
   EXPECT_LT(r.step, 100);
 }
 
-TEST(Env, DrivingIntoTrafficCollides) {
-  Env& env = shared_env();
-  // Full throttle straight ahead in dense traffic, for several seeds: at least one episode ends
-  // in a collision flagged by the box test or SUMO.
-  int collisions = 0;
-  for (std::uint64_t seed = 1; seed <= 10 && collisions == 0; ++seed) {
-    StepResult r = env.reset({.route = "straight", .density = 20, .traffic_seed = seed});
-    WaypointFollower follower(*env.route(), env.config().ego, {.target_speed_mps = 5.0});
-    follower.reset();
-    while (!r.is_last) r = env.step(follower.act(env.ego()));
-    if (r.events & kCollision) ++collisions;
-  }
-  EXPECT_GT(collisions, 0);
-}
-
 TEST(Env, RewardOnlyInTaskPhases) {
   Env& env = shared_env();
   StepResult r = env.reset({.route = "straight", .density = 0});

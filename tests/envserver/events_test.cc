@@ -28,8 +28,8 @@ TEST(BoxesOverlap, SeparatedTouchingAndRotatedCases) {
   const Box diamond{SemanticClass::kVehicle, {2.0 + 1.2, 1.0 + 1.2, kPi / 4}, 2.0, 2.0, 1.5};
   EXPECT_FALSE(boxes_overlap(a, diamond));
   // Moved so its corner (pointing along -x) pokes 0.2 m into a's right end.
-  const Box poke{SemanticClass::kVehicle, {2.0 + std::sqrt(2.0) - 0.2, 0.0, kPi / 4}, 2.0, 2.0,
-                 1.5};
+  const Box poke{
+      SemanticClass::kVehicle, {2.0 + std::sqrt(2.0) - 0.2, 0.0, kPi / 4}, 2.0, 2.0, 1.5};
   EXPECT_TRUE(boxes_overlap(a, poke));
   EXPECT_TRUE(boxes_overlap(poke, a));
 }
@@ -56,9 +56,8 @@ class EventDetectorTest : public ::testing::Test {
   }
   std::uint32_t check(const Pose2& pose, double speed = 5.0, std::span<const Box> others = {},
                       int step = 1) {
-    return detector_->update({.ego = {.pose = pose, .speed_mps = speed},
-                              .others = others,
-                              .step = step});
+    return detector_->update(
+        {.ego = {.pose = pose, .speed_mps = speed}, .others = others, .step = step});
   }
 
   indrive::testing::TempDir dir_;
@@ -79,7 +78,7 @@ TEST_F(EventDetectorTest, CleanDriveAlongTheLaneFiresNothing) {
 
 TEST_F(EventDetectorTest, LaneInvasionWhenMoreThanThirtyCentimetresCrossTheMarking) {
   // Lane half width 1.75, car half width 1.05: overlap beyond the marking = |lat| - 0.7.
-  EXPECT_EQ(check({60.0, -1.75 + 0.95, 0.0}), 0u);  // 0.25 m over the centre line
+  EXPECT_EQ(check({60.0, -1.75 + 0.95, 0.0}), 0u);             // 0.25 m over the centre line
   EXPECT_EQ(check({60.0, -1.75 + 1.05, 0.0}), kLaneInvasion);  // 0.35 m over
   // Towards the road edge too.
   EXPECT_EQ(check({60.0, -1.75 - 1.05, 0.0}), kLaneInvasion);
@@ -102,7 +101,8 @@ TEST_F(EventDetectorTest, OffRoadOutsideEveryLaneAndJunction) {
 }
 
 TEST_F(EventDetectorTest, CollisionFromBoxesAndFromSumo) {
-  const std::vector<Box> ahead = {{SemanticClass::kVehicle, {60.0 + 4.7, -1.75, 0.0}, 4.8, 2.1, 1.5}};
+  const std::vector<Box> ahead = {
+      {SemanticClass::kVehicle, {60.0 + 4.7, -1.75, 0.0}, 4.8, 2.1, 1.5}};
   EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, ahead), kCollision);
   const std::vector<Box> gap = {{SemanticClass::kVehicle, {60.0 + 4.9, -1.75, 0.0}, 4.8, 2.1, 1.5}};
   EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, gap), 0u);

@@ -64,9 +64,9 @@ TEST_P(Feasibility, FollowerCompletesTheRouteWithoutFailure) {
       worst_lateral = std::max(worst_lateral, std::abs(env.events().road().lateral_m));
     }
   }
-  EXPECT_EQ(r.events, kDestination) << event_names(r.events) << " at step " << r.step
-                                    << ", progress " << r.route_progress_m << " of "
-                                    << env.route()->length_m() << " m";
+  EXPECT_EQ(r.events, kDestination)
+      << event_names(r.events) << " at step " << r.step << ", progress " << r.route_progress_m
+      << " of " << env.route()->length_m() << " m";
   const double mean_speed = speed_sum / r.step;
   RecordProperty("steps", r.step);
   RecordProperty("worst_lateral_cm", static_cast<int>(100 * worst_lateral));

@@ -116,6 +116,33 @@ TEST(Libsumo, EgoStaysWhereItIsPlacedAndTrafficBrakesForIt) {
   EXPECT_TRUE(sumo.collisions().empty());
 }
 
+TEST(Libsumo, EgoPlacedOntoACarIsReportedAsACollision) {
+  TempDir dir;
+  auto& sumo = shared_libsumo();
+  sumo.load(make_t_junction_net(dir.path()), 3);
+  sumo.add_ego("ego", "we");
+  sumo.place_ego("ego", Pose2{30.0, -1.75, 0.0}, 0.0);
+  sumo.add_vehicle("car", {"we", "ce"}, kTrafficType, 0, 80.0, 0.0);
+  std::vector<VehicleState> states;
+  for (int i = 0; i < 5; ++i) {
+    sumo.place_ego("ego", Pose2{30.0, -1.75, 0.0}, 0.0);
+    sumo.step();
+  }
+  sumo.vehicles(states);
+  ASSERT_EQ(states.size(), 2u);
+  const VehicleState& car = states[0].id == "car" ? states[0] : states[1];
+  // Jump the ego onto the car: SUMO's own check must list the pair.
+  bool reported = false;
+  for (int i = 0; i < 3 && !reported; ++i) {
+    sumo.place_ego("ego", Pose2{car.pose.x_m + 1.0, car.pose.y_m, 0.0}, 5.0);
+    sumo.step();
+    for (const SumoCollision& c : sumo.collisions()) {
+      reported = reported || c.collider == "ego" || c.victim == "ego";
+    }
+  }
+  EXPECT_TRUE(reported);
+}
+
 TEST(Libsumo, SecondSimulationInOneProcessIsRefused) {
   shared_libsumo();
   EXPECT_THROW(make_sumo_connection(SumoConfig{}), SumoError);

@@ -159,8 +159,7 @@ int run_episode(std::map<std::string, std::string> flags) {
 
   double reward_sum = 0.0;
   while (!result.is_last) {
-    const int action =
-        follower ? follower->act(env.ego()) : static_cast<int>(rng() % kNumActions);
+    const int action = follower ? follower->act(env.ego()) : static_cast<int>(rng() % kNumActions);
     result = env.step(action);
     if (result.reward) reward_sum += *result.reward;
     record(result);
