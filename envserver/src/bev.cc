@@ -73,16 +73,36 @@ void BirdsEyeView::render_classes(const Box& ego, std::span<const Box> vehicles,
   const SceneCache& scene = *scene_;
 
   // Ground: each pixel centre's world point, looked up with the pixel's size as footprint so
-  // painted lines stay visible when a pixel is wider than a line.
+  // painted lines stay visible when a pixel is wider than a line. Map coordinates are affine
+  // along a row, as in the camera.
   const double mpp = at.metres_per_px;
+  const cv::Mat& base = scene.ground_map();
+  const int level = scene.line_level_for(mpp);
+  const cv::Mat& lines = scene.line_level(level);
+  const double res = scene.resolution_m();
+  const Eigen::Vector2d origin = scene.origin();
+  const std::uint8_t fallback = static_cast<std::uint8_t>(scene.ground_class());
+  const std::uint8_t road_line = static_cast<std::uint8_t>(SemanticClass::kRoadLine);
+  // One column step is one pixel to the right, i.e. mpp metres along -left.
+  const double col_step = at.sin_yaw * mpp / res;
+  const double row_step = at.cos_yaw * mpp / res;
   for (int row = 0; row < size; ++row) {
     std::uint8_t* out = class_ids.ptr<std::uint8_t>(row);
     const double forward = (at.row - (row + 0.5)) * mpp;
+    const double left = (at.col - 0.5) * mpp;
+    const double x0 = ego.pose.x_m + at.cos_yaw * forward - at.sin_yaw * left;
+    const double y0 = ego.pose.y_m + at.sin_yaw * forward + at.cos_yaw * left;
+    const double col0 = (x0 - origin.x()) / res, row0 = (origin.y() - y0) / res;
     for (int col = 0; col < size; ++col) {
-      const double left = (at.col - (col + 0.5)) * mpp;
-      const double x = ego.pose.x_m + at.cos_yaw * forward - at.sin_yaw * left;
-      const double y = ego.pose.y_m + at.sin_yaw * forward + at.cos_yaw * left;
-      out[col] = static_cast<std::uint8_t>(scene.ground_seen(x, y, mpp));
+      const double mc = col0 + col * col_step, mr = row0 + col * row_step;
+      if (!(mc >= 0.0 && mr >= 0.0 && mc < base.cols && mr < base.rows)) {
+        out[col] = fallback;
+        continue;
+      }
+      const int ci = static_cast<int>(mc), ri = static_cast<int>(mr);
+      out[col] = level > 0 && lines.ptr<std::uint8_t>(ri >> level)[ci >> level] != 0
+                     ? road_line
+                     : base.ptr<std::uint8_t>(ri)[ci];
     }
   }
 

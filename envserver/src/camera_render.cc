@@ -5,14 +5,16 @@
 // frame, pitched down by pitch_deg. Pixel (i, j) covers [i, i+1) x [j, j+1); its centre is
 // (i + 0.5, j + 0.5).
 //
-// Why this design (measured with indrive-camera-bench): the ground is most of the image, and
+// Why this design (measured with the camera_bench program): the ground is most of the image, and
 // a per-pixel lookup in a top-down map costs a few nanoseconds with no per-polygon work at all,
 // so cost does not grow with town size. Drawing ground polygons in perspective each frame
 // would need clipping and a culled polygon set per frame, for the same picture.
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "camera_geometry.h"
 #include "indrive/common/check.h"

@@ -288,8 +288,11 @@ SemanticClass SceneCache::ground_at(double x_m, double y_m) const {
 }
 
 int SceneCache::line_level_for(double footprint_m) const {
+  // The smallest cell at least as wide as the footprint: neighbouring pixels sample the ground
+  // one footprint apart, so a line's run of marked cells is at least that wide and no sample
+  // row can step over it. Lines therefore show one to two pixels wide at any distance.
   if (!(footprint_m > resolution_m_)) return 0;
-  const int level = static_cast<int>(std::floor(std::log2(footprint_m / resolution_m_)));
+  const int level = static_cast<int>(std::ceil(std::log2(footprint_m / resolution_m_) - 1e-9));
   return std::clamp(level, 0, num_levels() - 1);
 }
 

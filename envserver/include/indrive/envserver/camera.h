@@ -1,6 +1,6 @@
 // The semantic camera: a front-mounted pinhole camera that renders class ids (CARLA classes).
 //
-// How it renders (chosen for speed, see docs in camera_render.cc):
+// How it renders (chosen for speed; figures from tests/envserver/camera_bench.cc):
 // - Ground by inverse perspective. The static ground (road, sidewalk, painted lines) is
 //   rasterised once per town into a top-down class map (SceneCache, 0.1 m per cell). Each frame,
 //   every pixel below the horizon is intersected with the flat ground and looks its class up in
@@ -9,8 +9,9 @@
 // - Thin lines. A painted line far away is narrower than a pixel; nearest lookup would make it
 //   flicker in and out. Rule: a road line is drawn wherever it crosses the pixel's lateral
 //   ground footprint, so lane markings stay at least one pixel wide at any distance. The map
-//   keeps a pyramid of "a line crosses this cell" bits; each image row picks the level whose
-//   cell size matches its lateral footprint.
+//   keeps a pyramid of "a line crosses this cell" bits; each image row uses the level with the
+//   smallest cells at least as wide as its lateral footprint, so lines show one to two pixels
+//   wide. Lines seen end-on across the view (stop lines far ahead) can still fall between rows.
 // - Boxes (buildings, vegetation, vehicles) are clipped in 3D against the near plane, projected
 //   and scan-filled into a per-pixel 1/z buffer, so they occlude each other exactly. Upright
 //   boxes on flat ground always hide the ground behind them. Static boxes come from a grid
@@ -52,8 +53,8 @@ struct CameraConfig {
   double height_m = 2.4;   // mount point above the ground
   double pitch_deg = 0.0;  // positive looks down
   double near_m = 0.05;    // near clipping plane (camera depth)
-  double far_m = 120.0;    // nothing beyond this camera depth is drawn; ground there is
-                           // the scene's ground_class
+  double far_m = 120.0;    // ground beyond this camera depth shows ground_class; boxes
+                           // entirely beyond it are skipped
 };
 
 // Throws CameraError naming the first field that is out of range.
@@ -61,10 +62,11 @@ void validate(const CameraConfig& config);
 
 // Options of the precomputed static scene.
 struct SceneCacheOptions {
-  double resolution_m = 0.1;             // ground map cell size
-  double margin_m = 20.0;                // ground map border around the scene bounds
-  std::int64_t max_cells = 200'000'000;  // larger maps are coarsened (resolution grows)
-  double box_grid_cell_m = 32.0;         // cell size of the static box index
+  double resolution_m = 0.1;            // ground map cell size
+  double margin_m = 20.0;               // ground map border around the scene bounds
+  std::int64_t max_cells = 64'000'000;  // bytes of map per process; larger maps are
+                                        // coarsened by doubling resolution_m
+  double box_grid_cell_m = 32.0;        // cell size of the static box index
 };
 
 // The static scene prepared for fast rendering: the top-down ground class map, its road-line
@@ -88,7 +90,7 @@ class SceneCache {
   // crosses the 2^l x 2^l block of base cells.
   const cv::Mat& line_level(int level) const { return levels_[level]; }
   int num_levels() const { return static_cast<int>(levels_.size()); }
-  // The pyramid level whose cell size is at most footprint_m (0 for footprints below a cell).
+  // The pyramid level with the smallest cells at least footprint_m wide (0 below one cell).
   int line_level_for(double footprint_m) const;
   double resolution_m() const { return resolution_m_; }
   // World coordinates of the map's north-west corner (min x, max y).
