@@ -140,6 +140,43 @@ TEST(Env, RewardOnlyInTaskPhases) {
   EXPECT_TRUE(r.is_first == false);
 }
 
+TEST(Env, TaskPhaseRewardsProgressAlongTheRoute) {
+  EnvConfig config;
+  config.town = "town02";
+  config.task = "lane_following";
+  config.sumo.mode = SumoMode::kLibtraci;  // the shared Env holds libsumo
+  config.camera.width = 32;
+  config.camera.height = 32;
+  Env env(config);
+  StepResult r = env.reset({.route = "straight", .density = 0});
+  EXPECT_FALSE(r.reward.has_value());  // no reward for the reset observation
+  WaypointFollower follower(*env.route(), config.ego, {.target_speed_mps = 5.0});
+  follower.reset();
+  double waypoint_sum = 0.0;
+  for (int i = 0; i < 200 && !r.is_last; ++i) {
+    r = env.step(follower.act(env.ego()));
+    ASSERT_TRUE(r.reward.has_value());
+    EXPECT_DOUBLE_EQ(*r.reward, r.reward_terms.total());
+    EXPECT_DOUBLE_EQ(r.reward_terms.time, -0.01);
+    waypoint_sum += r.reward_terms.waypoint;
+  }
+  // Waypoints are ~2 m apart: the reward counts about one per 2 m of progress.
+  EXPECT_NEAR(waypoint_sum, r.route_progress_m / 2.0, 3.0);
+  // At the target speed, straight along the lane, the speed term is near its best (0.05 * 5).
+  EXPECT_GT(r.reward_terms.speed, 0.2);
+}
+
+TEST(Env, ResetCanSwitchTowns) {
+  Env& env = shared_env();
+  env.reset({.town = "town02", .route = "left_loop", .density = 5});
+  EXPECT_EQ(env.town().name, "town02");
+  EXPECT_EQ(env.route()->name(), "left_loop");
+  StepResult r = env.step(encode_action(1, 1));
+  EXPECT_EQ(r.step, 1);
+  env.reset({.town = "town01", .route = "straight", .density = 0});
+  EXPECT_EQ(env.town().name, "town01");
+}
+
 TEST(Env, BadInputIsNamed) {
   Env& env = shared_env();
   try {
