@@ -31,23 +31,6 @@ std::uint32_t crc_of(const cv::Mat& image) {
   return indrive::crc32(image.data, image.total() * image.elemSize());
 }
 
-// Runs up to `steps` seeded random actions (restarting nothing) and returns the observation
-// checksums, one per step including the reset.
-std::vector<std::uint32_t> run_random(Env& env, const ResetOptions& options, int steps,
-                                      std::uint64_t action_seed) {
-  std::vector<std::uint32_t> crcs;
-  StepResult r = env.reset(options);
-  crcs.push_back(crc_of(r.observation));
-  std::mt19937_64 rng(action_seed);
-  for (int i = 0; i < steps && !r.is_last; ++i) {
-    // Mostly straight with throttle, so the episode lasts and traffic comes into view.
-    const int action = (rng() % 4 == 0) ? static_cast<int>(rng() % kNumActions) : 4;
-    r = env.step(action);
-    crcs.push_back(crc_of(r.observation));
-  }
-  return crcs;
-}
-
 TEST(Env, SameSeedsGiveBitwiseEqualObservationsFor500Steps) {
   Env& env = shared_env();
   // Without a time limit or road rules ending it early: the follower keeps the ego on a loop.
