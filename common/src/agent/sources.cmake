@@ -4,4 +4,5 @@ target_sources(indrive_common PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/observation.cc
   ${CMAKE_CURRENT_LIST_DIR}/replay.cc
   ${CMAKE_CURRENT_LIST_DIR}/returns.cc
+  ${CMAKE_CURRENT_LIST_DIR}/world_model.cc
 )
