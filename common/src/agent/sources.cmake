@@ -1,5 +1,6 @@
 # Sources of common/agent (added to indrive_common).
 target_sources(indrive_common PRIVATE
+  ${CMAKE_CURRENT_LIST_DIR}/behavior.cc
   ${CMAKE_CURRENT_LIST_DIR}/config.cc
   ${CMAKE_CURRENT_LIST_DIR}/intrinsic.cc
   ${CMAKE_CURRENT_LIST_DIR}/observation.cc
