@@ -10,7 +10,7 @@
 
 #include "indrive/common/agent/replay.h"
 
-namespace indrive::agent::testing {
+namespace indrive::agent::synthetic {
 
 class DotEnv {
  public:
@@ -73,4 +73,4 @@ inline void collect_random(DotEnv& env, ReplayBuffer& replay, int steps, std::ui
   }
 }
 
-}  // namespace indrive::agent::testing
+}  // namespace indrive::agent::synthetic

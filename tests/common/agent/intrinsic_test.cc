@@ -55,8 +55,8 @@ TEST_P(IntrinsicStopGradient, WorldModelGetsNoGradientAndModuleDoes) {
   WorldModel wm(model, rng);
   auto module = make_intrinsic(small_intrinsic(GetParam()), model, rng);
   ReplayBuffer replay({.capacity = 1000, .height = 32, .width = 32, .seed = 2});
-  testing::DotEnv env(32, 1);
-  testing::collect_random(env, replay, 100, 3);
+  synthetic::DotEnv env(32, 1);
+  synthetic::collect_random(env, replay, 100, 3);
   const SequenceBatch batch = replay.sample(2, 6);
   nn::current_graph().reset();
   wm.params().zero_grad();

@@ -111,7 +111,7 @@ TEST(Replay, MalformedStepsThrow) {
 }
 
 TEST(Replay, SaveLoadRestoresContentAndRngExactly) {
-  testing::TempDir dir;
+  indrive::testing::TempDir dir;
   ReplayBuffer a(small_options(true));
   for (int i = 0; i < 7; ++i) {
     ReplayStep s = make_step(i, i == 0);
@@ -130,7 +130,7 @@ TEST(Replay, SaveLoadRestoresContentAndRngExactly) {
 }
 
 TEST(Replay, LoadRejectsCorruptOrForeignFiles) {
-  testing::TempDir dir;
+  indrive::testing::TempDir dir;
   ReplayBuffer a(small_options());
   for (int i = 0; i < 3; ++i) a.add(0, make_step(i));
   const auto path = dir.path() / "replay.bin";

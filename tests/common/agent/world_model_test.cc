@@ -17,8 +17,8 @@ WorldModelConfig tiny_model() {
 ReplayBuffer dot_replay(int steps, bool rewards = false) {
   ReplayBuffer replay(
       {.capacity = 10000, .height = 32, .width = 32, .has_rewards = rewards, .seed = 1});
-  testing::DotEnv env(32, 5);
-  testing::collect_random(env, replay, steps, 9);
+  synthetic::DotEnv env(32, 5);
+  synthetic::collect_random(env, replay, steps, 9);
   return replay;
 }
 
