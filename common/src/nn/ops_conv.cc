@@ -146,10 +146,10 @@ void conv2d_backward(Node& n) {
     auto gy = cmat(n.grad + i0 * g.rows_per_image() * oc, rows, oc);
     if (gw) {
       im2col(g, x->value + i0 * g.hb * g.wb * g.c, images, cols);
-      mat(gw, patch, oc).noalias() += cmat(cols, rows, patch).transpose() * gy;
+      detail::gemm(mat(gw, patch, oc), cmat(cols, rows, patch).transpose(), gy, true);
     }
     if (gx) {
-      mat(cols, rows, patch).noalias() = gy * cmat(w->value, patch, oc).transpose();
+      detail::gemm(mat(cols, rows, patch), gy, cmat(w->value, patch, oc).transpose(), false);
       col2im(g, cols, images, gx + i0 * g.hb * g.wb * g.c);
     }
   }
@@ -174,10 +174,10 @@ void conv_transpose2d_backward(Node& n) {
     im2col(g, n.grad + i0 * g.hb * g.wb * g.c, images, cols);
     auto gcols = cmat(cols, rows, patch);
     auto xin = cmat(x->value + i0 * g.rows_per_image() * ic, rows, ic);
-    if (gw) mat(gw, ic, patch).noalias() += xin.transpose() * gcols;
+    if (gw) detail::gemm(mat(gw, ic, patch), xin.transpose(), gcols, true);
     if (gx)
-      mat(gx + i0 * g.rows_per_image() * ic, rows, ic).noalias() +=
-          gcols * cmat(w->value, ic, patch).transpose();
+      detail::gemm(mat(gx + i0 * g.rows_per_image() * ic, rows, ic), gcols,
+                   cmat(w->value, ic, patch).transpose(), true);
   }
 }
 
@@ -208,8 +208,8 @@ Tensor conv2d(Tensor x, Tensor w, Tensor bias, ConvGeometry geom) {
     const std::int64_t images = std::min(chunk, g.n - i0);
     const std::int64_t rows = images * g.rows_per_image();
     im2col(g, x.data() + i0 * g.hb * g.wb * g.c, images, cols);
-    mat(n->value + i0 * g.rows_per_image() * oc, rows, oc).noalias() =
-        cmat(cols, rows, patch) * cmat(w.data(), patch, oc);
+    detail::gemm(mat(n->value + i0 * g.rows_per_image() * oc, rows, oc), cmat(cols, rows, patch),
+                 cmat(w.data(), patch, oc), false);
   }
   if (bias.defined()) {
     INDRIVE_CHECK_EQ(bias.numel(), oc) << "conv2d bias";
@@ -246,8 +246,8 @@ Tensor conv_transpose2d(Tensor x, Tensor w, Tensor bias, ConvGeometry geom) {
   for (std::int64_t i0 = 0; i0 < g.n; i0 += chunk) {
     const std::int64_t images = std::min(chunk, g.n - i0);
     const std::int64_t rows = images * g.rows_per_image();
-    mat(cols, rows, patch).noalias() =
-        cmat(x.data() + i0 * g.rows_per_image() * ic, rows, ic) * cmat(w.data(), ic, patch);
+    detail::gemm(mat(cols, rows, patch), cmat(x.data() + i0 * g.rows_per_image() * ic, rows, ic),
+                 cmat(w.data(), ic, patch), false);
     col2im(g, cols, images, n->value + i0 * g.hb * g.wb * g.c);
   }
   if (bias.defined()) {

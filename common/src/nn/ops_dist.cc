@@ -170,7 +170,6 @@ Tensor bce_with_logits(Tensor logits, Tensor target) {
   const float* t = target.data();
   for (std::int64_t i = 0, e = logits.numel(); i < e; ++i)
     n->value[i] = std::max(x[i], 0.0f) - x[i] * t[i] + std::log1p(std::exp(-std::fabs(x[i])));
-  n->in[1] = target.node();
   g.record(n, bce_backward, {logits.node(), nullptr});
   n->in[1] = target.node();
   return Tensor(n);

@@ -47,6 +47,55 @@ inline ConstMatrixMap cmat(const float* p, std::int64_t rows, std::int64_t cols)
   return ConstMatrixMap(p, rows, cols);
 }
 
+// Products with at least this many multiply-adds are split over threads; smaller ones run on
+// the calling thread, because a parallel region costs more than it saves (and much more when
+// the machine is oversubscribed and idle threads spin).
+inline constexpr std::int64_t kParallelGemmWork = std::int64_t{1} << 22;
+
+// Runs Eigen's GEMM single-threaded: the engine splits large products itself (below), so that
+// the thread count is ours to set and small products never open a parallel region.
+inline void eigen_single_threaded() {
+  static const bool once = (Eigen::setNbThreads(1), true);
+  (void)once;
+}
+
+// dst (m, n) = a (m, k) * b (k, n), or += when `accumulate`. a and b may be transposed maps.
+// Large products are split over output rows (or columns when there are few rows).
+template <typename Dst, typename A, typename B>
+void gemm(Dst&& dst, const A& a, const B& b, bool accumulate) {
+  eigen_single_threaded();
+  const std::int64_t m = dst.rows(), n = dst.cols(), k = a.cols();
+  const int threads = omp_in_parallel() ? 1 : omp_get_max_threads();
+  if (threads == 1 || m * n * k < kParallelGemmWork) {
+    if (accumulate)
+      dst.noalias() += a * b;
+    else
+      dst.noalias() = a * b;
+    return;
+  }
+  const bool by_rows = m >= 64 * threads || m >= n;
+  const std::int64_t extent = by_rows ? m : n;
+  // Split on multiples of 16 so that each part keeps full SIMD panels.
+  const std::int64_t part = ((extent + threads - 1) / threads + 15) / 16 * 16;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int t = 0; t < threads; ++t) {
+    const std::int64_t begin = std::min(extent, t * part);
+    const std::int64_t len = std::min(extent, begin + part) - begin;
+    if (len <= 0) continue;
+    if (by_rows) {
+      if (accumulate)
+        dst.middleRows(begin, len).noalias() += a.middleRows(begin, len) * b;
+      else
+        dst.middleRows(begin, len).noalias() = a.middleRows(begin, len) * b;
+    } else {
+      if (accumulate)
+        dst.middleCols(begin, len).noalias() += a * b.middleCols(begin, len);
+      else
+        dst.middleCols(begin, len).noalias() = a * b.middleCols(begin, len);
+    }
+  }
+}
+
 // Normalises a possibly negative axis and checks it.
 inline int normalize_axis(int axis, const Shape& shape) {
   const int a = axis < 0 ? axis + shape.rank : axis;

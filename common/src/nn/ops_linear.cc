@@ -18,8 +18,10 @@ void linear_backward(Node& n) {
   Node* b = n.in[2];
   const std::int64_t m = n.iparam[0], k = n.iparam[1], cols = n.iparam[2];
   auto gy = cmat(n.grad, m, cols);
-  if (float* gx = grad_of(x)) mat(gx, m, k).noalias() += gy * cmat(w->value, k, cols).transpose();
-  if (float* gw = grad_of(w)) mat(gw, k, cols).noalias() += cmat(x->value, m, k).transpose() * gy;
+  if (float* gx = grad_of(x))
+    detail::gemm(mat(gx, m, k), gy, cmat(w->value, k, cols).transpose(), true);
+  if (float* gw = grad_of(w))
+    detail::gemm(mat(gw, k, cols), cmat(x->value, m, k).transpose(), gy, true);
   if (float* gb = grad_of(b)) mat(gb, 1, cols) += gy.colwise().sum();
 }
 
@@ -32,7 +34,7 @@ Tensor linear_impl(Tensor x, Tensor w, Tensor bias) {
   Graph& g = current_graph();
   Node* n = g.new_node(detail::with_last(x.shape(), cols));
   auto y = mat(n->value, m, cols);
-  y.noalias() = cmat(x.data(), m, k) * cmat(w.data(), k, cols);
+  detail::gemm(y, cmat(x.data(), m, k), cmat(w.data(), k, cols), false);
   if (bias.defined()) {
     INDRIVE_CHECK_EQ(bias.numel(), cols) << "bias of shape " << bias.shape().str();
     y.rowwise() += cmat(bias.data(), 1, cols).row(0);

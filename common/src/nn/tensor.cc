@@ -297,7 +297,8 @@ void set_threads(int threads) {
   INDRIVE_CHECK(threads >= 1) << "threads must be >= 1, got " << threads;
   g_threads = threads;
   omp_set_num_threads(threads);
-  Eigen::setNbThreads(threads);
+  // Eigen's own GEMM threading stays off: the engine splits large products itself.
+  Eigen::setNbThreads(1);
 }
 
 int threads() { return g_threads > 0 ? g_threads : omp_get_max_threads(); }

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <initializer_list>
 #include <memory>
+#include <new>
 #include <span>
 #include <string>
 #include <vector>
@@ -47,6 +48,25 @@ using MatrixMap = Eigen::Map<RowMatrix>;
 using ConstMatrixMap = Eigen::Map<const RowMatrix>;
 
 namespace detail {
+
+// 64-byte aligned storage, so that parameter buffers have the same alignment in every run
+// (Eigen's kernels peel loops by alignment, which changes the rounding of sums).
+template <typename T>
+struct AlignedAllocator {
+  using value_type = T;
+  AlignedAllocator() = default;
+  template <typename U>
+  AlignedAllocator(const AlignedAllocator<U>&) {}
+  T* allocate(std::size_t n) {
+    return static_cast<T*>(::operator new(n * sizeof(T), std::align_val_t(64)));
+  }
+  void deallocate(T* p, std::size_t) { ::operator delete(p, std::align_val_t(64)); }
+  template <typename U>
+  bool operator==(const AlignedAllocator<U>&) const {
+    return true;
+  }
+};
+using AlignedFloats = std::vector<float, AlignedAllocator<float>>;
 
 struct Node;
 // Reverse-mode rule of one op: reads node.grad and adds into the grads of node.in[...].
@@ -213,8 +233,8 @@ class Parameter {
 
  private:
   std::string name_;
-  std::vector<float> value_;
-  std::vector<float> grad_;
+  detail::AlignedFloats value_;
+  detail::AlignedFloats grad_;
   detail::Node node_;
 };
 
@@ -263,8 +283,9 @@ class Rng {
   std::uint64_t s_[4];
 };
 
-// Sets the number of threads used by the engine (OpenMP loops and Eigen's GEMM). With one
-// thread and a fixed seed, results are bitwise reproducible.
+// Sets the number of threads used by the engine (OpenMP loops; large GEMMs are split over
+// them, small ops stay on the calling thread). With one thread and a fixed seed, results are
+// bitwise reproducible.
 void set_threads(int threads);
 // The number of threads set by set_threads (default: OpenMP's default).
 int threads();
