@@ -16,11 +16,7 @@ using ConstArray = Eigen::Map<const Eigen::ArrayXf>;
 
 // The gradient buffer of an input, allocated zeroed on first use; nullptr when the input does
 // not take a gradient.
-inline float* grad_of(Node* n) {
-  if (n == nullptr || !n->requires_grad) return nullptr;
-  if (n->grad == nullptr) n->grad = current_graph().alloc_zeroed(n->shape.numel());
-  return n->grad;
-}
+inline float* grad_of(Node* n) { return current_graph().grad_buffer(n); }
 
 // Below this many elements, elementwise loops stay on one thread (a parallel region costs more).
 inline constexpr std::int64_t kParallelMin = std::int64_t{1} << 16;
