@@ -1,0 +1,163 @@
+// Shapes, the graph's arena and backward pass, no-grad mode, parameters and the RNG.
+#include "indrive/common/nn/tensor.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+
+#include "indrive/common/nn/nn.h"
+
+namespace indrive::nn {
+namespace {
+
+// The unit tests run the engine on one thread: results are then bitwise reproducible, and on
+// a machine shared with other jobs, parallel regions would only add waiting. The threading
+// test below switches to two threads explicitly.
+const bool kSingleThreaded = (set_threads(1), true);
+
+TEST(ShapeTest, DimensionsRowsAndCols) {
+  Shape s{16, 64, 3};
+  EXPECT_EQ(s.rank, 3);
+  EXPECT_EQ(s.numel(), 16 * 64 * 3);
+  EXPECT_EQ(s.rows(), 16 * 64);
+  EXPECT_EQ(s.cols(), 3);
+  EXPECT_EQ(s[-1], 3);
+  EXPECT_EQ(s.str(), "(16, 64, 3)");
+  EXPECT_EQ(Shape().numel(), 1);
+  EXPECT_NE(s, (Shape{16, 64, 4}));
+}
+
+TEST(GraphTest, GradientsAccumulateOverUsesAndCalls) {
+  Graph& g = current_graph();
+  g.reset();
+  ParamGroup group("g");
+  Parameter& p = group.add("p", Shape{3});
+  for (float& v : p.value()) v = 2.0f;
+  // d/dp sum(p * p + p) = 2p + 1 = 5.
+  Tensor x = p.tensor();
+  g.backward(sum(add(mul(x, x), x)));
+  for (float v : p.grad()) EXPECT_FLOAT_EQ(v, 5.0f);
+  // A second graph adds to the same parameter gradient until zero_grad.
+  g.reset();
+  g.backward(sum(p.tensor()));
+  for (float v : p.grad()) EXPECT_FLOAT_EQ(v, 6.0f);
+  group.zero_grad();
+  for (float v : p.grad()) EXPECT_EQ(v, 0.0f);
+}
+
+TEST(GraphTest, NoGradModeRecordsNothing) {
+  Graph& g = current_graph();
+  g.reset();
+  ParamGroup group("g");
+  Parameter& p = group.add("p", Shape{2, 2});
+  for (float& v : p.value()) v = 1.5f;
+  Tensor y;
+  {
+    NoGradGuard no_grad;
+    EXPECT_FALSE(g.grad_enabled());
+    y = sum(tanh(p.tensor()));
+  }
+  EXPECT_TRUE(g.grad_enabled());
+  EXPECT_FALSE(y.requires_grad());
+  EXPECT_NEAR(y.item(), 4 * std::tanh(1.5f), 1e-6f);
+  g.backward(y);  // nothing to do
+  for (float v : p.grad()) EXPECT_EQ(v, 0.0f);
+}
+
+TEST(GraphTest, ConstantsGetNoGradient) {
+  Graph& g = current_graph();
+  g.reset();
+  Tensor c = full({2}, 3.0f);
+  Tensor leaf = grad_leaf({2}, std::vector<float>{1.0f, 2.0f});
+  g.backward(sum(mul(c, leaf)));
+  EXPECT_EQ(c.grad(), nullptr);
+  ASSERT_NE(leaf.grad(), nullptr);
+  EXPECT_FLOAT_EQ(leaf.grad()[0], 3.0f);
+}
+
+// One small training step's worth of ops.
+void training_step(Mlp& net, Adam& adam, int rows) {
+  Graph& g = current_graph();
+  g.reset();
+  Tensor x = full({rows, 8}, 0.25f);
+  Tensor y = full({rows, 1}, 1.0f);
+  g.backward(mse(net(x), y));
+  adam.step();
+}
+
+TEST(GraphTest, SteadyStateStepsDoNotAllocate) {
+  Rng rng(1);
+  ParamGroup group("model");
+  Mlp net(group, "net", 8, {.units = 64, .layers = 3, .out = 1}, rng);
+  Adam adam(group, {});
+  Graph& g = current_graph();
+  // A step larger than the arena's first block forces growth; reset then merges the blocks.
+  training_step(net, adam, 20000);
+  training_step(net, adam, 20000);
+  const std::size_t allocations = g.arena_system_allocations();
+  const std::size_t capacity = g.arena_capacity_bytes();
+  for (int i = 0; i < 5; ++i) training_step(net, adam, 20000);
+  EXPECT_EQ(g.arena_system_allocations(), allocations);
+  EXPECT_EQ(g.arena_capacity_bytes(), capacity);
+  EXPECT_GT(g.num_nodes(), 10u);
+  g.reset();
+  EXPECT_EQ(g.arena_used_bytes(), 0u);
+}
+
+// Forward and backward of a small conv + norm + linear model; returns the loss and all grads.
+std::vector<float> conv_model_grads(int threads) {
+  set_threads(threads);
+  Rng rng(21);
+  ParamGroup group("m");
+  ConvEncoder enc(group, "enc", {.image = 32, .channels = 3, .depth = 8, .min_res = 4}, rng);
+  Linear head(group, "head", enc.embed_dim(), 3, {}, rng);
+  std::vector<float> images(32 * 32 * 32 * 3);
+  for (float& v : images) v = rng.uniform();
+  Graph& g = current_graph();
+  g.reset();
+  Tensor loss = mean(square(head(enc(constant({32, 32, 32, 3}, images)))));
+  g.backward(loss);
+  std::vector<float> out = {loss.item()};
+  for (const auto& p : group.params()) out.insert(out.end(), p->grad().begin(), p->grad().end());
+  g.reset();
+  set_threads(1);
+  return out;
+}
+
+TEST(ThreadsTest, TwoThreadsAgreeWithOne) {
+  // Large enough that im2col, the GEMMs and the norms take their parallel paths.
+  const std::vector<float> one = conv_model_grads(1);
+  const std::vector<float> two = conv_model_grads(2);
+  ASSERT_EQ(one.size(), two.size());
+  for (std::size_t i = 0; i < one.size(); ++i)
+    ASSERT_NEAR(one[i], two[i], 1e-4f * std::fabs(one[i]) + 1e-6f) << "value " << i;
+  // One thread is bitwise reproducible.
+  const std::vector<float> again = conv_model_grads(1);
+  EXPECT_EQ(std::memcmp(one.data(), again.data(), one.size() * sizeof(float)), 0);
+}
+
+TEST(RngTest, DeterministicAndRoughlyNormal) {
+  Rng a(42), b(42), c(43);
+  EXPECT_EQ(a.next_u64(), b.next_u64());
+  EXPECT_NE(a.next_u64(), c.next_u64());
+  Rng r(7);
+  double mean = 0, var = 0;
+  const int n = 100000;
+  for (int i = 0; i < n; ++i) {
+    const double z = r.normal();
+    mean += z / n;
+    var += z * z / n;
+  }
+  EXPECT_NEAR(mean, 0.0, 0.02);
+  EXPECT_NEAR(var, 1.0, 0.02);
+  for (int i = 0; i < 1000; ++i) {
+    const float u = r.uniform();
+    EXPECT_GE(u, 0.0f);
+    EXPECT_LT(u, 1.0f);
+    EXPECT_LT(r.below(9), 9);
+  }
+}
+
+}  // namespace
+}  // namespace indrive::nn
