@@ -1,8 +1,9 @@
 #include "testing.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <random>
 #include <stdexcept>
 #include <system_error>
@@ -30,9 +31,28 @@ TempDir::~TempDir() {
 }
 
 int unique_domain_id() {
-  // Domain ids 0..232 are valid; keep 0 free for users and spread test processes by pid.
-  static std::atomic<int> offset{0};
-  return 1 + static_cast<int>((::getpid() * 7 + offset.fetch_add(1)) % 200);
+  // Domain ids 0..232 are valid; keep 0 free for users. A test process claims an id by
+  // holding an exclusive lock on a file named after it until the process exits, so two test
+  // processes running at the same time never share a domain. Children of a test use the id
+  // their parent passes them and never call this.
+  static int claimed = -1;
+  if (claimed >= 0) return claimed;
+  const auto folder = std::filesystem::temp_directory_path() / "indrive-test-domains";
+  std::error_code error;
+  std::filesystem::create_directories(folder, error);
+  const int start = static_cast<int>(::getpid() % 200);
+  for (int i = 0; i < 200; ++i) {
+    const int id = 1 + (start + i) % 200;
+    const auto path = folder / std::to_string(id);
+    const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+    if (fd < 0) continue;
+    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      claimed = id;  // fd stays open: the lock is released when the process exits
+      return claimed;
+    }
+    ::close(fd);
+  }
+  throw std::runtime_error("no free DDS domain id for this test: 200 test processes hold one");
 }
 
 std::filesystem::path source_path(const std::string& relative) {
