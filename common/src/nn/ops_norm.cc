@@ -37,7 +37,8 @@ void layer_norm_backward(Node& n) {
   const std::int64_t rows = n.shape.rows(), cols = n.shape.cols();
   const float* mean = n.saved;
   const float* rstd = n.saved + rows;
-  float* gx = grad_of(x);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(x, &fresh);
   float* gg = grad_of(gamma);
   float* gb = grad_of(beta);
   const float* gam = gamma ? gamma->value : nullptr;
@@ -85,9 +86,16 @@ void layer_norm_backward(Node& n) {
       if (gx) {
         float* gxr = gx + r * cols;
         const float md = sum_d * inv_c, mdx = sum_dx * inv_c;
-        for (std::int64_t c = 0; c < cols; ++c) {
-          const float d = gam ? g[c] * gam[c] : g[c];
-          gxr[c] += rs * (d - md - xh[c] * mdx);
+        if (fresh) {
+          for (std::int64_t c = 0; c < cols; ++c) {
+            const float d = gam ? g[c] * gam[c] : g[c];
+            gxr[c] = rs * (d - md - xh[c] * mdx);
+          }
+        } else {
+          for (std::int64_t c = 0; c < cols; ++c) {
+            const float d = gam ? g[c] * gam[c] : g[c];
+            gxr[c] += rs * (d - md - xh[c] * mdx);
+          }
         }
       }
     }
