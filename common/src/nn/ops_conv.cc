@@ -170,7 +170,8 @@ void conv_transpose2d_backward(Node& n) {
   const std::int64_t ic = n.iparam[7];
   Node* x = n.in[0];
   Node* w = n.in[1];
-  float* gx = grad_of(x);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(x, &fresh);
   float* gw = grad_of(w);
   if (float* gb = grad_of(n.in[2])) bias_grad(n.grad, gb, n.shape.rows(), g.c);
   const std::int64_t patch = g.patch();
@@ -185,7 +186,7 @@ void conv_transpose2d_backward(Node& n) {
     if (gw) detail::gemm(mat(gw, ic, patch), xin.transpose(), gcols, true);
     if (gx)
       detail::gemm(mat(gx + i0 * g.rows_per_image() * ic, rows, ic), gcols,
-                   cmat(w->value, ic, patch).transpose(), true);
+                   cmat(w->value, ic, patch).transpose(), !fresh);
   }
 }
 

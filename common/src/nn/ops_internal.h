@@ -18,6 +18,12 @@ using ConstArray = Eigen::Map<const Eigen::ArrayXf>;
 // not take a gradient.
 inline float* grad_of(Node* n) { return current_graph().grad_buffer(n); }
 
+// The gradient buffer of an input for an op that writes every element: *fresh tells whether
+// it is uninitialised (assign) or already holds contributions (accumulate).
+inline float* grad_for_write(Node* n, bool* fresh) {
+  return current_graph().grad_buffer_for_write(n, fresh);
+}
+
 // Below this many elements, elementwise loops stay on one thread (a parallel region costs more).
 inline constexpr std::int64_t kParallelMin = std::int64_t{1} << 16;
 inline constexpr std::int64_t kChunk = std::int64_t{1} << 14;

@@ -161,10 +161,22 @@ namespace {
 
 // iparam: outer, size, inner; fparam[0]: factor (1 for sum, 1/size for mean).
 void reduce_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
   if (gx == nullptr) return;
   const std::int64_t outer = n.iparam[0], size = n.iparam[1], inner = n.iparam[2];
   const float f = n.fparam[0];
+  if (inner == 1) {
+    // Rows broadcast their one gradient value (the common case: sums over the last axis).
+    detail::parallel_for(outer * size, [&](std::int64_t s, std::int64_t e) {
+      for (std::int64_t i = s; i < e; ++i) {
+        const float v = f * n.grad[i / size];
+        gx[i] = fresh ? v : gx[i] + v;
+      }
+    });
+    return;
+  }
+  if (fresh) std::fill_n(gx, outer * size * inner, 0.0f);
   for (std::int64_t o = 0; o < outer; ++o)
     for (std::int64_t k = 0; k < size; ++k) {
       float* dst = gx + (o * size + k) * inner;

@@ -156,6 +156,19 @@ float* Graph::grad_buffer(detail::Node* node) {
   return node->grad;
 }
 
+float* Graph::grad_buffer_for_write(detail::Node* node, bool* fresh) {
+  *fresh = false;
+  if (node == nullptr || !node->requires_grad) return nullptr;
+  if (node->grad == nullptr && node->view_of == nullptr) {
+    // Nothing has been added to this gradient yet (views allocate their source's buffer
+    // when first used), so the first writer may overwrite instead of accumulate.
+    node->grad = alloc(node->shape.numel());
+    *fresh = true;
+    return node->grad;
+  }
+  return grad_buffer(node);
+}
+
 void Graph::record(detail::Node* node, detail::BackwardFn fn,
                    std::initializer_list<detail::Node*> in) {
   INDRIVE_CHECK_LE(static_cast<int>(in.size()), 3) << "ops have at most 3 inputs";

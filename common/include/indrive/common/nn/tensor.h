@@ -169,6 +169,9 @@ class Graph {
   // The gradient buffer of `node`, allocated zeroed on first use (views resolve to their
   // source's buffer); nullptr when the node takes no gradient.
   float* grad_buffer(detail::Node* node);
+  // Like grad_buffer, but a buffer allocated by this call is left uninitialised and *fresh is
+  // set: the caller must then write every element (saves zeroing large buffers).
+  float* grad_buffer_for_write(detail::Node* node, bool* fresh);
   // Makes `node` the result of an op with inputs `in` and backward rule `fn`: it records the
   // node when grad mode is on and some input requires a gradient.
   void record(detail::Node* node, detail::BackwardFn fn, std::initializer_list<detail::Node*> in);
