@@ -1,0 +1,256 @@
+// A small RAII layer over Fast DDS 2.9: one participant per process, typed writers and readers
+// whose QoS comes from XML profiles by name (deploy/dds/*.xml), never from code.
+//
+//   indrive::dds::Participant participant({.domain_id = 7, .profiles_file = flags.dds_profiles});
+//   auto writer = participant.make_writer<indrive::msg::PolicySnapshot>();
+//   auto reader = participant.make_reader<indrive::msg::TrajectoryChunk>(
+//       [&](const indrive::msg::TrajectoryChunk& chunk) { ... });   // on a DDS thread
+//   indrive::dds::seal(snapshot);
+//   writer->write(snapshot);
+//
+// Topic names and profile names default to TopicTraits<T> (dds_messages.h). Writers and
+// readers must be destroyed before their participant. Setup failures throw DdsError with a
+// message that says what to fix; Fast DDS's own log lines go to the project's log sink.
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+
+#include "indrive/common/dds_messages.h"
+#include "indrive/common/log.h"
+
+namespace indrive::config {
+class Schema;
+}
+
+namespace indrive::dds {
+
+// A DDS entity could not be set up (bad profiles file, unknown profile, domain, ...).
+class DdsError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Name of the environment variable Fast DDS reads its default XML profiles file from.
+inline constexpr const char* kProfilesEnvVar = "FASTRTPS_DEFAULT_PROFILES_FILE";
+
+struct ParticipantOptions {
+  int domain_id = 0;
+  // XML profiles file; empty means the file named by FASTRTPS_DEFAULT_PROFILES_FILE.
+  std::string profiles_file{};
+  // <participant> profile in that file.
+  std::string participant_profile = "indrive_participant";
+};
+
+// Declares the dds.* configuration keys (domain_id, profiles_file, participant_profile).
+void declare_config(config::Schema& schema);
+
+// Returns the profiles file to load: explicit_path if not empty, else the environment
+// variable's value; throws DdsError when neither is set or the file does not exist.
+std::filesystem::path resolve_profiles_file(const std::string& explicit_path);
+
+// Routes Fast DDS's log output to the project's log sink (category "fastdds"); idempotent.
+void route_fastdds_log();
+
+// Typed writer for one topic. Create it with Participant::make_writer.
+template <typename T>
+class Writer {
+ public:
+  Writer(eprosima::fastdds::dds::Publisher* publisher, eprosima::fastdds::dds::DataWriter* writer)
+      : publisher_(publisher), writer_(writer) {}
+  ~Writer() { publisher_->delete_datawriter(writer_); }
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
+
+  // Publishes one sample; returns false when it could not be queued in time (a KEEP_ALL
+  // history stayed full for the profile's max_blocking_time), so the caller may retry.
+  bool write(const T& sample) { return writer_->write(const_cast<T*>(&sample)); }
+
+  // Number of readers currently matched.
+  int matched() const {
+    eprosima::fastdds::dds::PublicationMatchedStatus status;
+    writer_->get_publication_matched_status(status);
+    return status.current_count;
+  }
+
+  // Waits until at least `count` readers are matched; false on timeout.
+  bool wait_for_matched(int count, std::chrono::milliseconds timeout) const;
+
+  // Waits until every matched reliable reader acknowledged every sample; false on timeout.
+  bool wait_for_acknowledgments(std::chrono::milliseconds timeout) {
+    return writer_->wait_for_acknowledgments(to_duration(timeout)) ==
+           eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK;
+  }
+
+  // The underlying Fast DDS writer, for what this wrapper does not cover.
+  eprosima::fastdds::dds::DataWriter* native() { return writer_; }
+
+ private:
+  static eprosima::fastrtps::Duration_t to_duration(std::chrono::milliseconds timeout) {
+    return eprosima::fastrtps::Duration_t(static_cast<double>(timeout.count()) / 1000.0);
+  }
+  eprosima::fastdds::dds::Publisher* publisher_;
+  eprosima::fastdds::dds::DataWriter* writer_;
+};
+
+// Typed reader for one topic that calls a function for each sample as it arrives (on a Fast
+// DDS thread; the function must be thread-safe with respect to the caller's other threads).
+// Create it with Participant::make_reader.
+template <typename T>
+class Reader : public eprosima::fastdds::dds::DataReaderListener {
+ public:
+  using Callback = std::function<void(const T&)>;
+
+  explicit Reader(Callback callback) : callback_(std::move(callback)) {}
+  ~Reader() override {
+    if (reader_ != nullptr) {
+      reader_->set_listener(nullptr);
+      subscriber_->delete_datareader(reader_);
+    }
+  }
+  Reader(const Reader&) = delete;
+  Reader& operator=(const Reader&) = delete;
+
+  // Number of writers currently matched.
+  int matched() const {
+    eprosima::fastdds::dds::SubscriptionMatchedStatus status;
+    reader_->get_subscription_matched_status(status);
+    return status.current_count;
+  }
+
+  // Waits until at least `count` writers are matched; false on timeout.
+  bool wait_for_matched(int count, std::chrono::milliseconds timeout) const;
+
+  // Samples whose callback threw; they are logged and skipped, never propagated.
+  std::uint64_t callback_failures() const { return callback_failures_.load(); }
+
+  // The underlying Fast DDS reader, for what this wrapper does not cover.
+  eprosima::fastdds::dds::DataReader* native() { return reader_; }
+
+  // Takes every available sample and hands each valid one to the callback.
+  void on_data_available(eprosima::fastdds::dds::DataReader* reader) override {
+    std::lock_guard<std::mutex> lock(take_mutex_);
+    eprosima::fastdds::dds::SampleInfo info;
+    while (reader->take_next_sample(&sample_, &info) ==
+           eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      try {
+        callback_(sample_);
+      } catch (const std::exception& error) {
+        callback_failures_.fetch_add(1);
+        INDRIVE_LOG(kError, "dds")
+            << "reader callback failed on " << reader->get_topicdescription()->get_name() << ": "
+            << error.what();
+      }
+    }
+  }
+
+ private:
+  friend class Participant;
+  void attach(eprosima::fastdds::dds::Subscriber* subscriber,
+              eprosima::fastdds::dds::DataReader* reader) {
+    subscriber_ = subscriber;
+    reader_ = reader;
+  }
+
+  Callback callback_;
+  eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
+  eprosima::fastdds::dds::DataReader* reader_ = nullptr;
+  std::mutex take_mutex_;
+  T sample_;  // reused, so its sequences keep their capacity between samples
+  std::atomic<std::uint64_t> callback_failures_{0};
+};
+
+// One DomainParticipant with one Publisher and one Subscriber.
+class Participant {
+ public:
+  // Loads the profiles file and creates the participant; throws DdsError on failure.
+  explicit Participant(const ParticipantOptions& options);
+  ~Participant();
+  Participant(const Participant&) = delete;
+  Participant& operator=(const Participant&) = delete;
+
+  // Creates a writer on `topic` with the QoS of the XML <data_writer> profile `profile`.
+  template <typename T>
+  std::unique_ptr<Writer<T>> make_writer(
+      const std::string& topic = TopicTraits<T>::kTopic,
+      const std::string& profile = TopicTraits<T>::kWriterProfile) {
+    auto* topic_entity = find_or_create_topic<T>(topic);
+    return std::make_unique<Writer<T>>(publisher_, create_writer(topic_entity, profile));
+  }
+
+  // Creates a reader on `topic` with the QoS of the XML <data_reader> profile `profile`;
+  // on_sample is called for every sample taken.
+  template <typename T>
+  std::unique_ptr<Reader<T>> make_reader(
+      typename Reader<T>::Callback on_sample, const std::string& topic = TopicTraits<T>::kTopic,
+      const std::string& profile = TopicTraits<T>::kReaderProfile) {
+    auto* topic_entity = find_or_create_topic<T>(topic);
+    auto reader = std::make_unique<Reader<T>>(std::move(on_sample));
+    reader->attach(subscriber_, create_reader(topic_entity, profile, reader.get()));
+    return reader;
+  }
+
+  // The profiles file this participant was configured from.
+  const std::filesystem::path& profiles_file() const { return profiles_file_; }
+  int domain_id() const { return domain_id_; }
+  // The underlying Fast DDS participant, for what this wrapper does not cover.
+  eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
+
+ private:
+  template <typename T>
+  eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& topic) {
+    eprosima::fastdds::dds::TypeSupport type(new typename TopicTraits<T>::PubSubType());
+    return find_or_create_topic(topic, type);
+  }
+  eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& topic,
+                                                      eprosima::fastdds::dds::TypeSupport type);
+  eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic,
+                                                    const std::string& profile);
+  eprosima::fastdds::dds::DataReader* create_reader(
+      eprosima::fastdds::dds::Topic* topic, const std::string& profile,
+      eprosima::fastdds::dds::DataReaderListener* listener);
+
+  std::filesystem::path profiles_file_;
+  int domain_id_ = 0;
+  eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
+  eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
+  eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
+  std::mutex topics_mutex_;
+  std::map<std::string, eprosima::fastdds::dds::Topic*> topics_;
+};
+
+namespace detail {
+// Polls `current()` until it reaches `count` or the timeout passes.
+bool wait_for_count(const std::function<int()>& current, int count,
+                    std::chrono::milliseconds timeout);
+}  // namespace detail
+
+template <typename T>
+bool Writer<T>::wait_for_matched(int count, std::chrono::milliseconds timeout) const {
+  return detail::wait_for_count([this] { return matched(); }, count, timeout);
+}
+
+template <typename T>
+bool Reader<T>::wait_for_matched(int count, std::chrono::milliseconds timeout) const {
+  return detail::wait_for_count([this] { return matched(); }, count, timeout);
+}
+
+}  // namespace indrive::dds

@@ -1,0 +1,184 @@
+#include "indrive/common/dds.h"
+
+#include <cstdlib>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/log/Log.hpp>
+#include <thread>
+
+#include "indrive/common/config.h"
+
+namespace indrive::dds {
+namespace {
+
+using eprosima::fastdds::dds::DomainParticipantFactory;
+using eprosima::fastrtps::types::ReturnCode_t;
+
+// Forwards Fast DDS log entries to the project's sink, so nothing lands on stdout.
+class SinkConsumer : public eprosima::fastdds::dds::LogConsumer {
+ public:
+  void Consume(const eprosima::fastdds::dds::Log::Entry& entry) override {
+    using Kind = eprosima::fastdds::dds::Log::Kind;
+    const log::Level level = entry.kind == Kind::Error     ? log::Level::kError
+                             : entry.kind == Kind::Warning ? log::Level::kWarn
+                                                           : log::Level::kDebug;
+    const char* category = entry.context.category != nullptr ? entry.context.category : "";
+    const std::string message = std::string("[") + category + "] " + entry.message;
+    log::write(level, "fastdds", message,
+               entry.context.filename != nullptr ? entry.context.filename : "fastdds",
+               entry.context.line);
+  }
+};
+
+}  // namespace
+
+void route_fastdds_log() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    using eprosima::fastdds::dds::Log;
+    Log::ClearConsumers();
+    Log::RegisterConsumer(std::make_unique<SinkConsumer>());
+    Log::SetVerbosity(Log::Kind::Warning);
+  });
+}
+
+void declare_config(config::Schema& schema) {
+  schema.add_int("dds.domain_id", 0, "DDS domain of the run; processes of one run share it", 0, 232)
+      .add_string("dds.profiles_file", "",
+                  "XML profiles file (deploy/dds/*.xml); empty: FASTRTPS_DEFAULT_PROFILES_FILE")
+      .add_string("dds.participant_profile", "indrive_participant",
+                  "<participant> profile in the XML profiles file");
+}
+
+std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
+  std::string path = explicit_path;
+  std::string source = "the dds-profiles argument";
+  if (path.empty()) {
+    const char* from_env = std::getenv(kProfilesEnvVar);
+    if (from_env == nullptr || *from_env == '\0') {
+      throw DdsError(
+          "no DDS profiles file: pass --dds-profiles <file> or set "
+          "FASTRTPS_DEFAULT_PROFILES_FILE (deploy/dds/default.xml for several hosts, "
+          "deploy/dds/single_host.xml for one host)");
+    }
+    path = from_env;
+    source = kProfilesEnvVar;
+  }
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error)) {
+    throw DdsError("DDS profiles file '" + path + "' (from " + source +
+                   ") does not exist or is not a file; use one of deploy/dds/*.xml");
+  }
+  return path;
+}
+
+Participant::Participant(const ParticipantOptions& options)
+    : profiles_file_(resolve_profiles_file(options.profiles_file)), domain_id_(options.domain_id) {
+  route_fastdds_log();
+  if (domain_id_ < 0 || domain_id_ > 232) {
+    throw DdsError("DDS domain id " + std::to_string(domain_id_) +
+                   " is out of range; use 0..232 (UDP port numbers are derived from it)");
+  }
+  auto* factory = DomainParticipantFactory::get_instance();
+  // Loading the same file twice is harmless: Fast DDS remembers the files it has parsed.
+  if (factory->load_XML_profiles_file(profiles_file_.string()) != ReturnCode_t::RETCODE_OK) {
+    throw DdsError("DDS profiles file '" + profiles_file_.string() +
+                   "' could not be loaded (malformed XML, an unknown element, or a profile name "
+                   "already loaded from another file); the log above has Fast DDS's reason");
+  }
+  eprosima::fastdds::dds::DomainParticipantQos qos;
+  if (factory->get_participant_qos_from_profile(options.participant_profile, qos) !=
+      ReturnCode_t::RETCODE_OK) {
+    throw DdsError("DDS profiles file '" + profiles_file_.string() +
+                   "' has no <participant> profile named '" + options.participant_profile + "'");
+  }
+  participant_ = factory->create_participant(domain_id_, qos);
+  if (participant_ == nullptr) {
+    throw DdsError("could not create a DDS participant in domain " + std::to_string(domain_id_) +
+                   " with profile '" + options.participant_profile + "' of '" +
+                   profiles_file_.string() + "' (transport setup failed; see the log)");
+  }
+  publisher_ = participant_->create_publisher(eprosima::fastdds::dds::PUBLISHER_QOS_DEFAULT);
+  subscriber_ = participant_->create_subscriber(eprosima::fastdds::dds::SUBSCRIBER_QOS_DEFAULT);
+  if (publisher_ == nullptr || subscriber_ == nullptr) {
+    participant_->delete_contained_entities();
+    factory->delete_participant(participant_);
+    throw DdsError("could not create the DDS publisher/subscriber of the participant");
+  }
+  INDRIVE_LOG(kInfo, "dds") << "participant in domain " << domain_id_ << " from "
+                            << profiles_file_.string();
+}
+
+Participant::~Participant() {
+  // Writers and readers are owned by the caller and must already be gone; topics, publisher
+  // and subscriber go with the participant.
+  participant_->delete_contained_entities();
+  DomainParticipantFactory::get_instance()->delete_participant(participant_);
+}
+
+eprosima::fastdds::dds::Topic* Participant::find_or_create_topic(
+    const std::string& topic, eprosima::fastdds::dds::TypeSupport type) {
+  std::lock_guard<std::mutex> lock(topics_mutex_);
+  if (auto it = topics_.find(topic); it != topics_.end()) {
+    if (it->second->get_type_name() != type.get_type_name()) {
+      throw DdsError("topic '" + topic + "' is already used with type " +
+                     it->second->get_type_name() + ", not " + type.get_type_name());
+    }
+    return it->second;
+  }
+  if (type.register_type(participant_) != ReturnCode_t::RETCODE_OK) {
+    throw DdsError("could not register DDS type " + type.get_type_name());
+  }
+  auto* created = participant_->create_topic(topic, type.get_type_name(),
+                                             eprosima::fastdds::dds::TOPIC_QOS_DEFAULT);
+  if (created == nullptr) throw DdsError("could not create DDS topic '" + topic + "'");
+  topics_.emplace(topic, created);
+  return created;
+}
+
+eprosima::fastdds::dds::DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic,
+                                                               const std::string& profile) {
+  eprosima::fastdds::dds::DataWriterQos qos;
+  if (publisher_->get_datawriter_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
+    throw DdsError("DDS profiles file '" + profiles_file_.string() +
+                   "' has no <data_writer> profile named '" + profile + "' (needed for topic '" +
+                   topic->get_name() + "')");
+  }
+  auto* writer = publisher_->create_datawriter(topic, qos);
+  if (writer == nullptr) {
+    throw DdsError("could not create a DDS writer on '" + topic->get_name() + "' with profile '" +
+                   profile + "' (inconsistent QoS in the XML?)");
+  }
+  return writer;
+}
+
+eprosima::fastdds::dds::DataReader* Participant::create_reader(
+    eprosima::fastdds::dds::Topic* topic, const std::string& profile,
+    eprosima::fastdds::dds::DataReaderListener* listener) {
+  eprosima::fastdds::dds::DataReaderQos qos;
+  if (subscriber_->get_datareader_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
+    throw DdsError("DDS profiles file '" + profiles_file_.string() +
+                   "' has no <data_reader> profile named '" + profile + "' (needed for topic '" +
+                   topic->get_name() + "')");
+  }
+  auto* reader = subscriber_->create_datareader(topic, qos, listener);
+  if (reader == nullptr) {
+    throw DdsError("could not create a DDS reader on '" + topic->get_name() + "' with profile '" +
+                   profile + "' (inconsistent QoS in the XML?)");
+  }
+  return reader;
+}
+
+namespace detail {
+
+bool wait_for_count(const std::function<int()>& current, int count,
+                    std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (current() < count) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
+}
+
+}  // namespace detail
+}  // namespace indrive::dds

@@ -1,0 +1,144 @@
+#include "indrive/common/dds.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <fstream>
+
+#include "testing.h"
+
+namespace indrive::dds {
+namespace {
+
+using namespace std::chrono_literals;
+
+// Every test here loads the same profiles file: Fast DDS keeps loaded profiles per process,
+// and two files that define the same profile names cannot both be loaded in one process.
+std::string profiles() { return testing::source_path("deploy/dds/single_host.xml").string(); }
+
+template <typename F>
+std::string error_of(F&& make) {
+  try {
+    make();
+  } catch (const DdsError& error) {
+    return error.what();
+  }
+  return "(no DdsError)";
+}
+
+TEST(DdsParticipant, MissingProfilesFileNamesThePath) {
+  const auto message =
+      error_of([] { Participant participant({.profiles_file = "/nonexistent/profiles.xml"}); });
+  EXPECT_NE(message.find("/nonexistent/profiles.xml"), std::string::npos) << message;
+  EXPECT_NE(message.find("does not exist"), std::string::npos) << message;
+}
+
+TEST(DdsParticipant, ProfilesFileComesFromEnvironmentWhenNoFlag) {
+  ::unsetenv(kProfilesEnvVar);
+  const auto message = error_of([] { resolve_profiles_file(""); });
+  EXPECT_NE(message.find("FASTRTPS_DEFAULT_PROFILES_FILE"), std::string::npos) << message;
+  ::setenv(kProfilesEnvVar, profiles().c_str(), 1);
+  EXPECT_EQ(resolve_profiles_file("").string(), profiles());
+  const std::string other = testing::source_path("deploy/dds/default.xml").string();
+  EXPECT_EQ(resolve_profiles_file(other).string(), other) << "an explicit path wins";
+  ::unsetenv(kProfilesEnvVar);
+}
+
+TEST(DdsParticipant, MalformedXmlIsReported) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "broken.xml";
+  std::ofstream(path) << "<dds><profiles><participant profile_name=\"x\">";
+  const auto message = error_of([&] { Participant participant({.profiles_file = path.string()}); });
+  EXPECT_NE(message.find("could not be loaded"), std::string::npos) << message;
+}
+
+TEST(DdsParticipant, UnknownProfilesAreNamed) {
+  const auto participant_message = error_of([] {
+    Participant participant({.profiles_file = profiles(), .participant_profile = "no_such"});
+  });
+  EXPECT_NE(participant_message.find("no <participant> profile named 'no_such'"), std::string::npos)
+      << participant_message;
+
+  Participant participant({.domain_id = testing::unique_domain_id(), .profiles_file = profiles()});
+  const auto writer_message = error_of(
+      [&] { participant.make_writer<msg::StepAllowance>("indrive/allowance", "no_writer"); });
+  EXPECT_NE(writer_message.find("no <data_writer> profile named 'no_writer'"), std::string::npos)
+      << writer_message;
+  const auto domain_message =
+      error_of([] { Participant participant({.domain_id = 300, .profiles_file = profiles()}); });
+  EXPECT_NE(domain_message.find("0..232"), std::string::npos) << domain_message;
+}
+
+TEST(DdsParticipant, LateReaderGetsTransientLocalAllowance) {
+  const int domain = testing::unique_domain_id();
+  Participant learner({.domain_id = domain, .profiles_file = profiles()});
+  Participant actor({.domain_id = domain, .profiles_file = profiles()});
+  auto writer = learner.make_writer<msg::StepAllowance>();
+  msg::StepAllowance allowance;
+  allowance.run_id("run");
+  allowance.total_env_steps(4096);
+  allowance.replay_ratio(32.0);
+  seal(allowance);
+  ASSERT_TRUE(writer->write(allowance));
+  allowance.total_env_steps(8192);  // KEEP_LAST 1: only this one must reach a late reader
+  ASSERT_TRUE(writer->write(allowance));
+
+  std::atomic<std::uint64_t> received{0};
+  std::atomic<int> samples{0};
+  auto reader = actor.make_reader<msg::StepAllowance>([&](const msg::StepAllowance& sample) {
+    if (validate(sample, "run") == DropReason::kOk) received = sample.total_env_steps();
+    samples.fetch_add(1);
+  });
+  ASSERT_TRUE(reader->wait_for_matched(1, 10s));
+  for (int i = 0; i < 500 && received.load() == 0; ++i) std::this_thread::sleep_for(10ms);
+  EXPECT_EQ(received.load(), 8192u);
+  EXPECT_EQ(samples.load(), 1);
+}
+
+TEST(DdsParticipant, ThrowingCallbackIsCountedNotPropagated) {
+  const int domain = testing::unique_domain_id();
+  Participant participant({.domain_id = domain, .profiles_file = profiles()});
+  auto writer = participant.make_writer<msg::EpisodeResult>();
+  auto reader = participant.make_reader<msg::EpisodeResult>(
+      [](const msg::EpisodeResult&) { throw std::runtime_error("consumer bug"); });
+  ASSERT_TRUE(writer->wait_for_matched(1, 10s));
+  msg::EpisodeResult result;
+  seal(result);
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(writer->write(result));
+  for (int i = 0; i < 500 && reader->callback_failures() < 3; ++i)
+    std::this_thread::sleep_for(10ms);
+  EXPECT_EQ(reader->callback_failures(), 3u);
+}
+
+TEST(DdsParticipant, HeartbeatsKeepOneSamplePerKey) {
+  const int domain = testing::unique_domain_id();
+  Participant participant({.domain_id = domain, .profiles_file = profiles()});
+  auto writer = participant.make_writer<msg::Heartbeat>();
+  std::mutex mutex;
+  std::map<std::pair<int, std::uint32_t>, std::uint64_t> latest;
+  auto reader = participant.make_reader<msg::Heartbeat>([&](const msg::Heartbeat& beat) {
+    std::lock_guard<std::mutex> lock(mutex);
+    latest[{beat.role(), beat.id()}] = beat.env_steps();
+  });
+  ASSERT_TRUE(writer->wait_for_matched(1, 10s));
+  msg::Heartbeat beat;
+  beat.role(msg::ROLE_ACTOR);
+  beat.id(2);
+  beat.env_steps(10);
+  seal(beat);
+  ASSERT_TRUE(writer->write(beat));
+  for (int i = 0; i < 500; ++i) {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      if (!latest.empty()) break;
+    }
+    std::this_thread::sleep_for(10ms);
+  }
+  std::lock_guard<std::mutex> lock(mutex);
+  ASSERT_EQ(latest.size(), 1u);
+  EXPECT_EQ((latest[{msg::ROLE_ACTOR, 2u}]), 10u);
+}
+
+}  // namespace
+}  // namespace indrive::dds
