@@ -1,0 +1,115 @@
+// Episode events, checked every step and reported as bits.
+//
+// Every event ends the episode. All but kDestination are failures (logged as the failure
+// reason). kTimeLimit is a truncation: the episode stops but the state is not terminal for the
+// world model's continuation target; every other event is terminal.
+//
+//   collision        the ego's box overlaps another vehicle's box (oriented boxes), or SUMO
+//                    reports a collision involving the ego
+//   lane_invasion    outside junctions, more than lane_invasion_overlap_m of the ego's width
+//                    lies beyond its lane's marking: |lateral| + w/2 - lane_w/2 > overlap
+//   wrong_direction  outside junctions, heading differs from the lane's by more than 90 deg
+//   off_road         the ego's footprint centre is on no lane and in no junction
+//   stall            speed under 1 km/h for 60 s in a row
+//   destination      the route's end reached or its loop completed (from the route tracker)
+//   time_limit       the episode reached its step limit (1000 steps)
+//
+//   EventDetector events(net, EventConfig{}, ego_params);
+//   events.reset();
+//   std::uint32_t bits = events.update({.ego = ego, .others = boxes, .step = t});
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "indrive/envserver/ego.h"
+#include "indrive/envserver/net.h"
+#include "indrive/envserver/scene.h"
+
+namespace indrive::env {
+
+// Event bits; several may fire in one step.
+enum EventBit : std::uint32_t {
+  kCollision = 1u << 0,
+  kLaneInvasion = 1u << 1,
+  kWrongDirection = 1u << 2,
+  kOffRoad = 1u << 3,
+  kStall = 1u << 4,
+  kDestination = 1u << 5,
+  kTimeLimit = 1u << 6,
+};
+inline constexpr int kNumEvents = 7;
+inline constexpr std::uint32_t kFailureEvents =
+    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kTimeLimit;
+inline constexpr std::uint32_t kTerminalEvents =
+    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kDestination;
+
+// Returns the name of one event bit ("collision", ...), or "unknown".
+const char* event_name(EventBit bit);
+// Returns the names of all bits set, joined by '+' ("none" when zero).
+std::string event_names(std::uint32_t bits);
+// True when the bits end the episode.
+inline bool ends_episode(std::uint32_t bits) { return bits != 0; }
+// True when the episode ended in a terminal state (not a time-limit truncation alone).
+inline bool is_terminal(std::uint32_t bits) { return (bits & kTerminalEvents) != 0; }
+// True when any failure event fired.
+inline bool is_failure(std::uint32_t bits) { return (bits & kFailureEvents) != 0; }
+
+// Thresholds of the events.
+struct EventConfig {
+  double lane_invasion_overlap_m = 0.3;
+  double wrong_direction_deg = 90.0;
+  double stall_speed_mps = 1.0 / 3.6;
+  double stall_time_s = 60.0;
+  int time_limit_steps = 1000;
+  double dt_s = 0.1;
+};
+
+// True when two upright boxes' footprints overlap (separating-axis test on the rectangles).
+bool boxes_overlap(const Box& a, const Box& b);
+
+// What the ego's position means for the road rules, for logging and tests.
+struct RoadStatus {
+  bool drivable = false;
+  bool in_junction = false;  // inside a junction polygon or on an internal lane
+  int lane = -1;             // lane the ego is on (-1 off all lanes)
+  double lateral_m = 0.0;    // signed offset from that lane's centre line
+  double heading_error_rad = 0.0;
+};
+
+// Checks the events of each step. Keeps the stall timer between steps.
+class EventDetector {
+ public:
+  // The network must outlive the detector.
+  EventDetector(const RoadNetwork& net, const EventConfig& config, const EgoParams& ego);
+
+  // Starts a new episode (clears the stall timer).
+  void reset();
+
+  // What one step's check needs.
+  struct Inputs {
+    EgoState ego;
+    std::span<const Box> others;  // other vehicles' boxes
+    bool sumo_collision = false;  // SUMO listed a collision involving the ego this step
+    bool route_finished = false;  // the route tracker reports the end / a completed lap
+    int step = 0;                 // steps taken in this episode, this one included
+  };
+  // Returns the event bits of this step.
+  std::uint32_t update(const Inputs& inputs);
+  // The road status computed in the last update().
+  const RoadStatus& road() const { return road_; }
+  // Road status of an ego pose (no state).
+  RoadStatus road_status(const Pose2& pose) const;
+
+  const EventConfig& config() const { return config_; }
+
+ private:
+  const RoadNetwork* net_;
+  EventConfig config_;
+  EgoParams ego_;
+  int slow_steps_ = 0;
+  RoadStatus road_;
+};
+
+}  // namespace indrive::env

@@ -1,0 +1,157 @@
+// Routes: the four fixed paths a task is driven on, and a tracker of progress along one.
+//
+// Every town has four routes, as in the paper: `straight` (point to point along a corridor,
+// no turns), `right_loop` (closed loop of right turns only), `left_loop` (closed loop of left
+// turns only) and `two_turn` (closed loop mixing left and right turns). Built-in towns ship
+// them in a YAML file; for any other network derive_routes() finds them. A Route is the lane
+// sequence (internal junction lanes included) and dense waypoints every ~2 m.
+//
+//   std::vector<Route> routes = build_routes(net, read_route_file(path));
+//   const Route& route = find_route(routes, "right_loop");   // throws RouteError if unknown
+//   RouteTracker tracker(route);
+//   tracker.reset();
+//   RouteStep step = tracker.update(ego_pose);   // every env step
+//   if (step.finished) { /* destination reached or loop completed */ }
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "indrive/envserver/net.h"
+#include "indrive/envserver/scene.h"
+
+namespace indrive::env {
+
+// The route names every town provides, in this order.
+inline constexpr std::array<std::string_view, 4> kRouteNames = {"straight", "right_loop",
+                                                                "left_loop", "two_turn"};
+
+// An unknown route name, a route file that cannot be read, or a route that does not fit the
+// network (edges not connected). The message lists what is known or what is wrong.
+class RouteError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// A route as stored in a file: the normal edges it drives, in order. A loop's last edge
+// connects back to its first.
+struct RouteSpec {
+  std::string name;
+  bool loop = false;
+  std::vector<std::string> edges;
+};
+
+// A point on the route's centre line.
+struct Waypoint {
+  Eigen::Vector2d position{0.0, 0.0};
+  double heading_rad = 0.0;   // direction of travel
+  double lane_width_m = 3.5;  // width of the lane the waypoint lies on
+  double s_m = 0.0;           // arc length from the route start
+  int lane = -1;              // index into RoadNetwork::lanes()
+};
+
+// The closest point of a route to a query point.
+struct RoutePoint {
+  double s_m = 0.0;        // arc length of the closest route point, in [0, length_m]
+  double lateral_m = 0.0;  // signed offset from the route centre line, positive to the left
+  double heading_rad = 0.0;
+  double lane_width_m = 3.5;
+};
+
+// A fixed path through the network with dense waypoints. Self-contained: it copies what it
+// needs from the network, so it outlives the RoadNetwork it was built from.
+class Route {
+ public:
+  // Builds the route from a spec; throws RouteError when an edge is unknown, consecutive edges
+  // are not connected, or a loop does not close. `spacing_m` is the waypoint spacing.
+  Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m = 2.0);
+
+  const std::string& name() const { return spec_.name; }
+  bool is_loop() const { return spec_.loop; }
+  const RouteSpec& spec() const { return spec_; }
+  // The lanes driven, in order, internal junction lanes included (indices into the network).
+  const std::vector<int>& lanes() const { return lanes_; }
+  // Turn direction at each junction crossed, in driving order (a loop's closing junction last).
+  const std::vector<TurnDirection>& turns() const { return turns_; }
+  // Waypoints every ~spacing_m from the start; a loop's last waypoint lies before its start.
+  const std::vector<Waypoint>& waypoints() const { return waypoints_; }
+  // Total length of the centre line in metres (one lap for a loop).
+  double length_m() const { return length_m_; }
+  // Pose at the first waypoint, facing along the route.
+  Pose2 start_pose() const;
+  // Pose on the route centre line at arc length s_m (wrapped for loops, clamped otherwise).
+  Pose2 pose_at(double s_m) const;
+  // Projects a point onto the centre line, searching only arc lengths within `window_m` of
+  // `s_hint_m` (wrapping on loops); a negative window searches the whole route.
+  RoutePoint project(const Eigen::Vector2d& point, double s_hint_m = 0.0,
+                     double window_m = -1.0) const;
+  // Index of the first waypoint strictly ahead of arc length s_m (wraps to 0 on loops; on a
+  // point-to-point route the last waypoint once past it).
+  int next_waypoint(double s_m) const;
+
+ private:
+  RouteSpec spec_;
+  std::vector<int> lanes_;
+  std::vector<TurnDirection> turns_;
+  std::vector<Eigen::Vector2d> line_;  // dense centre line
+  std::vector<double> line_s_m_;       // arc length per centre-line point
+  std::vector<double> line_width_m_;   // lane width per centre-line point
+  std::vector<Waypoint> waypoints_;
+  double length_m_ = 0.0;
+};
+
+// What one tracker update reports.
+struct RouteStep {
+  double progress_m = 0.0;   // distance driven along the route since reset (unwrapped on loops)
+  double delta_m = 0.0;      // change of progress_m in this update (negative when reversing)
+  int waypoints_passed = 0;  // new waypoints passed in this update (never negative)
+  int next_waypoint = 0;     // index into Route::waypoints()
+  double lateral_m = 0.0;    // signed offset from the route centre line, positive to the left
+  double distance_to_route_m = 0.0;  // |lateral_m|
+  bool finished = false;             // reached the end (point to point) or completed one lap (loop)
+};
+
+// Follows a vehicle along a route step by step. Searching near the last position keeps loops
+// and routes that pass near themselves unambiguous.
+class RouteTracker {
+ public:
+  // Tracks `route`, which must outlive the tracker. `finish_tolerance_m` is how close to the
+  // end a point-to-point route counts as reached.
+  explicit RouteTracker(const Route& route, double finish_tolerance_m = 3.0);
+  // Restarts at arc length `s_m` (the route start by default).
+  void reset(double s_m = 0.0);
+  // Advances with the vehicle's new pose and reports progress.
+  RouteStep update(const Pose2& pose);
+  // The last report (all zero after reset).
+  const RouteStep& last() const { return last_; }
+
+ private:
+  const Route* route_;
+  double finish_tolerance_m_;
+  double start_s_m_ = 0.0;
+  double s_m_ = 0.0;              // current arc length on the route, wrapped for loops
+  double progress_m_ = 0.0;       // unwrapped distance since reset
+  double best_progress_m_ = 0.0;  // waypoints count only once: progress high-water mark
+  RouteStep last_;
+};
+
+// Reads route specs from a YAML file (a map from route name to {loop: bool, edges: [ids]});
+// throws RouteError when the file is missing or malformed.
+std::vector<RouteSpec> read_route_file(const std::filesystem::path& path);
+// Writes route specs in the format read_route_file() reads.
+void write_route_file(const std::filesystem::path& path, const std::vector<RouteSpec>& specs);
+// Finds the four standard routes in any network: the longest straight corridor, the smallest
+// loops of right turns (clockwise) and of left turns (counter-clockwise), and the smallest
+// loop with both. Throws RouteError naming the route kinds the network does not allow.
+std::vector<RouteSpec> derive_routes(const RoadNetwork& net);
+// Builds a Route per spec; throws RouteError when a spec does not fit the network.
+std::vector<Route> build_routes(const RoadNetwork& net, const std::vector<RouteSpec>& specs);
+// Returns the route called `name`; throws RouteError listing the known names otherwise.
+const Route& find_route(const std::vector<Route>& routes, std::string_view name);
+
+}  // namespace indrive::env

@@ -1,0 +1,149 @@
+#include "indrive/envserver/events.h"
+
+#include <array>
+#include <cmath>
+#include <numbers>
+
+#include "indrive/common/check.h"
+
+namespace indrive::env {
+namespace {
+
+std::array<Eigen::Vector2d, 4> corners(const Box& box) {
+  const Eigen::Vector2d c(box.pose.x_m, box.pose.y_m);
+  const Eigen::Vector2d f(std::cos(box.pose.yaw_rad), std::sin(box.pose.yaw_rad));
+  const Eigen::Vector2d l(-f.y(), f.x());
+  const Eigen::Vector2d hf = 0.5 * box.length_m * f;
+  const Eigen::Vector2d hl = 0.5 * box.width_m * l;
+  return {c + hf + hl, c + hf - hl, c - hf - hl, c - hf + hl};
+}
+
+// True when the projections of both corner sets on the axis are disjoint.
+bool separated_on(const Eigen::Vector2d& axis, const std::array<Eigen::Vector2d, 4>& a,
+                  const std::array<Eigen::Vector2d, 4>& b) {
+  double a_min = INFINITY, a_max = -INFINITY, b_min = INFINITY, b_max = -INFINITY;
+  for (int i = 0; i < 4; ++i) {
+    const double pa = axis.dot(a[i]);
+    const double pb = axis.dot(b[i]);
+    a_min = std::min(a_min, pa);
+    a_max = std::max(a_max, pa);
+    b_min = std::min(b_min, pb);
+    b_max = std::max(b_max, pb);
+  }
+  return a_max < b_min || b_max < a_min;
+}
+
+}  // namespace
+
+const char* event_name(EventBit bit) {
+  switch (bit) {
+    case kCollision:
+      return "collision";
+    case kLaneInvasion:
+      return "lane_invasion";
+    case kWrongDirection:
+      return "wrong_direction";
+    case kOffRoad:
+      return "off_road";
+    case kStall:
+      return "stall";
+    case kDestination:
+      return "destination";
+    case kTimeLimit:
+      return "time_limit";
+  }
+  return "unknown";
+}
+
+std::string event_names(std::uint32_t bits) {
+  if (bits == 0) return "none";
+  std::string names;
+  for (int i = 0; i < kNumEvents; ++i) {
+    const auto bit = static_cast<EventBit>(1u << i);
+    if ((bits & bit) == 0) continue;
+    if (!names.empty()) names += '+';
+    names += event_name(bit);
+  }
+  return names;
+}
+
+bool boxes_overlap(const Box& a, const Box& b) {
+  // Quick reject on the circumscribed circles: most pairs are far apart.
+  const double dx = a.pose.x_m - b.pose.x_m;
+  const double dy = a.pose.y_m - b.pose.y_m;
+  const double reach =
+      0.5 * (std::hypot(a.length_m, a.width_m) + std::hypot(b.length_m, b.width_m));
+  if (dx * dx + dy * dy > reach * reach) return false;
+  const auto ca = corners(a);
+  const auto cb = corners(b);
+  // Two rectangles are disjoint iff one of their four edge normals separates them.
+  for (const Box* box : {&a, &b}) {
+    const Eigen::Vector2d f(std::cos(box->pose.yaw_rad), std::sin(box->pose.yaw_rad));
+    if (separated_on(f, ca, cb)) return false;
+    if (separated_on(Eigen::Vector2d(-f.y(), f.x()), ca, cb)) return false;
+  }
+  return true;
+}
+
+EventDetector::EventDetector(const RoadNetwork& net, const EventConfig& config,
+                             const EgoParams& ego)
+    : net_(&net), config_(config), ego_(ego) {
+  INDRIVE_CHECK(config.dt_s > 0.0) << "event dt must be positive";
+  INDRIVE_CHECK(config.time_limit_steps > 0) << "time limit must be positive";
+}
+
+void EventDetector::reset() {
+  slow_steps_ = 0;
+  road_ = RoadStatus{};
+}
+
+RoadStatus EventDetector::road_status(const Pose2& pose) const {
+  RoadStatus status;
+  const Eigen::Vector2d centre(pose.x_m, pose.y_m);
+  status.drivable = net_->is_drivable(centre);
+  status.in_junction = net_->in_junction(centre);
+  if (const auto at = net_->locate(centre, pose.yaw_rad)) {
+    status.lane = at->lane;
+    status.lateral_m = at->lateral_m;
+    status.heading_error_rad = wrap_angle(pose.yaw_rad - at->heading_rad);
+    status.in_junction = status.in_junction || net_->lane(at->lane).internal;
+  }
+  return status;
+}
+
+std::uint32_t EventDetector::update(const Inputs& in) {
+  std::uint32_t bits = 0;
+
+  // Collision: own geometry first, SUMO's list as a second source.
+  const Box ego_box{SemanticClass::kVehicle, in.ego.pose, ego_.length_m, ego_.width_m,
+                    ego_.height_m};
+  bool hit = in.sumo_collision;
+  for (const Box& other : in.others) {
+    if (hit) break;
+    hit = boxes_overlap(ego_box, other);
+  }
+  if (hit) bits |= kCollision;
+
+  // Road rules.
+  road_ = road_status(in.ego.pose);
+  if (!road_.drivable) bits |= kOffRoad;
+  if (road_.lane >= 0 && !road_.in_junction) {
+    const double lane_width = net_->lane(road_.lane).width_m;
+    const double beyond_marking = std::abs(road_.lateral_m) + 0.5 * ego_.width_m - 0.5 * lane_width;
+    if (beyond_marking > config_.lane_invasion_overlap_m) bits |= kLaneInvasion;
+    if (std::abs(road_.heading_error_rad) >
+        config_.wrong_direction_deg * std::numbers::pi / 180.0) {
+      bits |= kWrongDirection;
+    }
+  }
+
+  // Stall: too slow for too long, counted in whole steps.
+  slow_steps_ = in.ego.speed_mps < config_.stall_speed_mps ? slow_steps_ + 1 : 0;
+  if (slow_steps_ * config_.dt_s >= config_.stall_time_s - 1e-9) bits |= kStall;
+
+  if (in.route_finished) bits |= kDestination;
+  if (in.step >= config_.time_limit_steps) bits |= kTimeLimit;
+  return bits;
+}
+
+}  // namespace indrive::env

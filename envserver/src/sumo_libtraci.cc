@@ -1,0 +1,44 @@
+// SumoConnection over libtraci: SUMO runs as a subprocess, driven over TCP.
+#include <libsumo/libtraci.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <sstream>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "indrive/common/check.h"
+#include "sumo_clients.h"
+
+#define INDRIVE_SUMO_API libtraci
+#define INDRIVE_SUMO_CLASS LibtraciConnection
+#include "sumo_client_impl.inc"
+
+namespace indrive::env::detail {
+namespace {
+
+std::atomic<int> g_next_label{0};
+
+}  // namespace
+
+void LibtraciConnection::start(const std::vector<std::string>& args) {
+  std::vector<std::string> command{config_.sumo_binary.string()};
+  command.insert(command.end(), args.begin(), args.end());
+  // Each connection has its own label, so several simulations can live in one process.
+  label_ = "indrive" + std::to_string(g_next_label.fetch_add(1));
+  // A free port is picked by libtraci (-1); a few retries cover a slow subprocess start.
+  libtraci::Simulation::start(command, -1, 60, label_);
+}
+
+void LibtraciConnection::select() {
+  if (libtraci::Simulation::getLabel() != label_) libtraci::Simulation::switchConnection(label_);
+}
+
+void LibtraciConnection::release() {}
+
+std::unique_ptr<SumoConnection> make_libtraci_connection(const SumoConfig& config) {
+  return std::make_unique<LibtraciConnection>(config);
+}
+
+}  // namespace indrive::env::detail

@@ -1,0 +1,171 @@
+#include "indrive/envserver/env.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "indrive/common/checksum.h"
+#include "indrive/envserver/follower.h"
+#include "testing.h"
+
+namespace indrive::env {
+namespace {
+
+// libsumo runs one simulation per process, so all tests here share one Env (64x64 keeps the
+// rendering cheap; the camera has its own tests).
+Env& shared_env() {
+  static std::unique_ptr<Env> env = [] {
+    EnvConfig config;
+    config.town = "town01";
+    config.camera.width = 64;
+    config.camera.height = 64;
+    return std::make_unique<Env>(config);
+  }();
+  return *env;
+}
+
+std::uint32_t crc_of(const cv::Mat& image) {
+  EXPECT_TRUE(image.isContinuous());
+  return indrive::crc32(image.data, image.total() * image.elemSize());
+}
+
+// Runs up to `steps` seeded random actions (restarting nothing) and returns the observation
+// checksums, one per step including the reset.
+std::vector<std::uint32_t> run_random(Env& env, const ResetOptions& options, int steps,
+                                      std::uint64_t action_seed) {
+  std::vector<std::uint32_t> crcs;
+  StepResult r = env.reset(options);
+  crcs.push_back(crc_of(r.observation));
+  std::mt19937_64 rng(action_seed);
+  for (int i = 0; i < steps && !r.is_last; ++i) {
+    // Mostly straight with throttle, so the episode lasts and traffic comes into view.
+    const int action = (rng() % 4 == 0) ? static_cast<int>(rng() % kNumActions) : 4;
+    r = env.step(action);
+    crcs.push_back(crc_of(r.observation));
+  }
+  return crcs;
+}
+
+TEST(Env, SameSeedsGiveBitwiseEqualObservationsFor500Steps) {
+  Env& env = shared_env();
+  // Without a time limit or road rules ending it early: the follower keeps the ego on a loop.
+  ResetOptions options{.route = "right_loop", .density = 20, .traffic_seed = 11, .spawn_seed = 3};
+  auto drive = [&](const ResetOptions& o) {
+    std::vector<std::uint32_t> crcs;
+    StepResult r = env.reset(o);
+    WaypointFollower follower(*env.route(), env.config().ego, {.target_speed_mps = 5.0});
+    follower.reset();
+    crcs.push_back(crc_of(r.observation));
+    for (int i = 0; i < 500 && !r.is_last; ++i) {
+      r = env.step(follower.act(env.ego()));
+      crcs.push_back(crc_of(r.observation));
+    }
+    return crcs;
+  };
+  const auto first = drive(options);
+  const auto second = drive(options);
+  ASSERT_EQ(first.size(), 501u) << "the episode ended early";
+  EXPECT_EQ(first, second);
+  // Another traffic seed changes what the camera sees (traffic is really in the picture).
+  options.traffic_seed = 12;
+  const auto other = drive(options);
+  EXPECT_NE(first, other);
+}
+
+TEST(Env, RandomSpawnDependsOnTheSpawnSeedOnly) {
+  Env& env = shared_env();
+  const Pose2 a = env.reset({.density = 0, .traffic_seed = 1, .spawn_seed = 5}).ego.pose;
+  const Pose2 b = env.reset({.density = 0, .traffic_seed = 2, .spawn_seed = 5}).ego.pose;
+  const Pose2 c = env.reset({.density = 0, .traffic_seed = 1, .spawn_seed = 6}).ego.pose;
+  EXPECT_EQ(a.x_m, b.x_m);
+  EXPECT_EQ(a.y_m, b.y_m);
+  EXPECT_TRUE(a.x_m != c.x_m || a.y_m != c.y_m);
+}
+
+TEST(Env, TrafficIsKeptAtTheConfiguredDensity) {
+  Env& env = shared_env();
+  for (int density : {5, 10, 20}) {
+    StepResult r = env.reset({.route = "right_loop", .density = density, .traffic_seed = 4});
+    WaypointFollower follower(*env.route(), env.config().ego, {.target_speed_mps = 5.0});
+    follower.reset();
+    int min_near = 1000;
+    int max_near = 0;
+    for (int i = 0; i < 300 && !r.is_last; ++i) {
+      r = env.step(follower.act(env.ego()));
+      if (i < 50) continue;  // insertion takes a few steps
+      int near = 0;
+      for (const Box& b : env.traffic_boxes()) {
+        if (std::hypot(b.pose.x_m - r.ego.pose.x_m, b.pose.y_m - r.ego.pose.y_m) <= 150.0) ++near;
+      }
+      min_near = std::min(min_near, near);
+      max_near = std::max(max_near, near);
+    }
+    EXPECT_GE(min_near, density - 2) << "density " << density;
+    EXPECT_LE(max_near, density + 2) << "density " << density;
+  }
+}
+
+TEST(Env, StandingStillStallsAfterSixtySeconds) {
+  Env& env = shared_env();
+  StepResult r = env.reset({.route = "straight", .density = 0});
+  const int no_throttle_straight = encode_action(1, 0);
+  while (!r.is_last) r = env.step(no_throttle_straight);
+  EXPECT_EQ(r.events, kStall);
+  EXPECT_EQ(r.step, 600);
+  EXPECT_TRUE(r.is_terminal);
+}
+
+TEST(Env, CirclingLeftLeavesTheLane) {
+  Env& env = shared_env();
+  StepResult r = env.reset({.route = "straight", .density = 0});
+  while (!r.is_last) r = env.step(encode_action(0, 2));
+  EXPECT_TRUE(r.events & (kLaneInvasion | kOffRoad | kWrongDirection)) << event_names(r.events);
+  EXPECT_FALSE(r.events & kCollision);
+  EXPECT_LT(r.step, 100);
+}
+
+TEST(Env, RewardOnlyInTaskPhases) {
+  Env& env = shared_env();
+  StepResult r = env.reset({.route = "straight", .density = 0});
+  EXPECT_FALSE(r.reward.has_value());
+  r = env.step(encode_action(1, 2));
+  EXPECT_FALSE(r.reward.has_value());  // pretraining config: no reward at all
+  EXPECT_TRUE(r.is_first == false);
+}
+
+TEST(Env, BadInputIsNamed) {
+  Env& env = shared_env();
+  try {
+    env.reset({.density = 7});
+    FAIL() << "expected EnvError";
+  } catch (const EnvError& e) {
+    EXPECT_NE(std::string(e.what()).find("7"), std::string::npos);
+  }
+  try {
+    env.reset({.route = "figure_eight"});
+    FAIL() << "expected RouteError";
+  } catch (const RouteError& e) {
+    EXPECT_NE(std::string(e.what()).find("figure_eight"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("right_loop"), std::string::npos);
+  }
+  EnvConfig missing;
+  missing.town = "/nonexistent/town.net.xml";
+  missing.sumo.mode = SumoMode::kLibtraci;  // the shared Env holds libsumo
+  EXPECT_THROW(Env{missing}, MapError);
+  EnvConfig no_sumo;
+  no_sumo.sumo.mode = SumoMode::kLibtraci;
+  no_sumo.sumo.sumo_binary = "/nonexistent/sumo";
+  try {
+    Env env2(no_sumo);
+    FAIL() << "expected SumoError";
+  } catch (const SumoError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/sumo"), std::string::npos);
+  }
+  // The env still works after the failed resets.
+  EXPECT_NO_THROW(env.reset({.route = "straight", .density = 5}));
+}
+
+}  // namespace
+}  // namespace indrive::env

@@ -1,0 +1,135 @@
+#include "indrive/envserver/events.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include "sim_test_net.h"
+#include "testing.h"
+
+namespace indrive::env {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+TEST(BoxesOverlap, SeparatedTouchingAndRotatedCases) {
+  const Box a{SemanticClass::kVehicle, {0.0, 0.0, 0.0}, 4.0, 2.0, 1.5};
+  Box b = a;
+  b.pose.x_m = 4.1;  // 0.1 m gap nose to tail
+  EXPECT_FALSE(boxes_overlap(a, b));
+  b.pose.x_m = 3.9;  // 0.1 m overlap
+  EXPECT_TRUE(boxes_overlap(a, b));
+  b.pose = {0.0, 2.05, 0.0};  // side by side, 5 cm apart
+  EXPECT_FALSE(boxes_overlap(a, b));
+  // A square rotated 45 deg: its corner reaches sqrt(2) from its centre. Placed diagonally off
+  // a's corner (2, 1) so the axis-aligned bounding boxes overlap but the shapes do not.
+  const Box diamond{SemanticClass::kVehicle, {2.0 + 1.2, 1.0 + 1.2, kPi / 4}, 2.0, 2.0, 1.5};
+  EXPECT_FALSE(boxes_overlap(a, diamond));
+  // Moved so its corner (pointing along -x) pokes 0.2 m into a's right end.
+  const Box poke{
+      SemanticClass::kVehicle, {2.0 + std::sqrt(2.0) - 0.2, 0.0, kPi / 4}, 2.0, 2.0, 1.5};
+  EXPECT_TRUE(boxes_overlap(a, poke));
+  EXPECT_TRUE(boxes_overlap(poke, a));
+}
+
+TEST(EventNames, JoinSetBits) {
+  EXPECT_EQ(event_names(0), "none");
+  EXPECT_EQ(event_names(kCollision | kStall), "collision+stall");
+  EXPECT_TRUE(is_terminal(kDestination));
+  EXPECT_FALSE(is_failure(kDestination));
+  EXPECT_FALSE(is_terminal(kTimeLimit));
+  EXPECT_TRUE(is_failure(kTimeLimit));
+  EXPECT_TRUE(is_terminal(kTimeLimit | kCollision));
+}
+
+// The T-junction test network: eastbound lane "we_0" centre at y = -1.75 from x ~ 0 to the
+// junction at x = 150, width 3.5 m.
+class EventDetectorTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    net_ = std::make_unique<RoadNetwork>(
+        RoadNetwork::load(indrive::testing::make_t_junction_net(dir_.path())));
+    detector_ = std::make_unique<EventDetector>(*net_, EventConfig{}, EgoParams{});
+    detector_->reset();
+  }
+  std::uint32_t check(const Pose2& pose, double speed = 5.0, std::span<const Box> others = {},
+                      int step = 1) {
+    return detector_->update(
+        {.ego = {.pose = pose, .speed_mps = speed}, .others = others, .step = step});
+  }
+
+  indrive::testing::TempDir dir_;
+  std::unique_ptr<RoadNetwork> net_;
+  std::unique_ptr<EventDetector> detector_;
+};
+
+TEST_F(EventDetectorTest, CleanDriveAlongTheLaneFiresNothing) {
+  for (int i = 0; i < 200; ++i) {
+    const double x = 10.0 + 0.5 * i;  // 10 m .. 110 m, lane centre, heading east
+    ASSERT_EQ(check({x, -1.75, 0.0}, 5.0, {}, i + 1), 0u) << "at x = " << x;
+  }
+  // Through the junction and up the north branch, on its northbound lane (x = 151.75).
+  for (double y = -1.75; y < 60.0; y += 0.5) {
+    ASSERT_EQ(check({151.75, y, kPi / 2}), 0u) << "at y = " << y;
+  }
+}
+
+TEST_F(EventDetectorTest, LaneInvasionWhenMoreThanThirtyCentimetresCrossTheMarking) {
+  // Lane half width 1.75, car half width 1.05: overlap beyond the marking = |lat| - 0.7.
+  EXPECT_EQ(check({60.0, -1.75 + 0.95, 0.0}), 0u);             // 0.25 m over the centre line
+  EXPECT_EQ(check({60.0, -1.75 + 1.05, 0.0}), kLaneInvasion);  // 0.35 m over
+  // Towards the road edge too.
+  EXPECT_EQ(check({60.0, -1.75 - 1.05, 0.0}), kLaneInvasion);
+}
+
+TEST_F(EventDetectorTest, WrongDirectionWhenFacingAgainstTheLane) {
+  EXPECT_EQ(check({60.0, -1.75, kPi * 0.45}), 0u);  // 81 deg off: still allowed
+  // On the westbound lane (y = +1.75) facing east: wrong way, and no lane invasion since it
+  // sits centred in that lane.
+  EXPECT_EQ(check({60.0, 1.75, 0.0}), kWrongDirection);
+  EXPECT_EQ(check({60.0, -1.75, kPi}), kWrongDirection);
+}
+
+TEST_F(EventDetectorTest, OffRoadOutsideEveryLaneAndJunction) {
+  const std::uint32_t bits = check({60.0, -12.0, 0.0});
+  EXPECT_TRUE(bits & kOffRoad) << event_names(bits);
+  EXPECT_FALSE(check({60.0, -1.75, 0.0}) & kOffRoad);
+  // Inside the junction, crooked: neither off road nor a lane rule.
+  EXPECT_EQ(check({150.0, 0.0, kPi / 4}), 0u);
+}
+
+TEST_F(EventDetectorTest, CollisionFromBoxesAndFromSumo) {
+  const std::vector<Box> ahead = {
+      {SemanticClass::kVehicle, {60.0 + 4.7, -1.75, 0.0}, 4.8, 2.1, 1.5}};
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, ahead), kCollision);
+  const std::vector<Box> gap = {{SemanticClass::kVehicle, {60.0 + 4.9, -1.75, 0.0}, 4.8, 2.1, 1.5}};
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, gap), 0u);
+  EXPECT_EQ(detector_->update({.ego = {.pose = {60.0, -1.75, 0.0}, .speed_mps = 5.0},
+                               .sumo_collision = true,
+                               .step = 1}),
+            kCollision);
+}
+
+TEST_F(EventDetectorTest, StallAfterSixtySecondsBelowOneKilometrePerHour) {
+  for (int i = 1; i < 600; ++i) ASSERT_EQ(check({60.0, -1.75, 0.0}, 0.2, {}, i), 0u) << i;
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 0.2, {}, 600), kStall);
+  // Moving again restarts the timer.
+  detector_->reset();
+  for (int i = 1; i < 400; ++i) check({60.0, -1.75, 0.0}, 0.0, {}, i);
+  check({60.0, -1.75, 0.0}, 1.0, {}, 400);
+  for (int i = 401; i < 900; ++i) ASSERT_EQ(check({60.0, -1.75, 0.0}, 0.0, {}, i), 0u) << i;
+}
+
+TEST_F(EventDetectorTest, DestinationAndTimeLimit) {
+  EXPECT_EQ(detector_->update({.ego = {.pose = {60.0, -1.75, 0.0}, .speed_mps = 5.0},
+                               .route_finished = true,
+                               .step = 10}),
+            kDestination);
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, {}, 999), 0u);
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, {}, 1000), kTimeLimit);
+}
+
+}  // namespace
+}  // namespace indrive::env
