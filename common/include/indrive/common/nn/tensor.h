@@ -1,0 +1,293 @@
+// Float32 tensors, the define-by-run autodiff graph, parameters and parameter groups.
+//
+// A Tensor is a cheap handle to a node of the current thread's Graph. Nodes and their buffers
+// live in the graph's arena, which Graph::reset() rewinds after each step, so a steady-state
+// training step does not call malloc per op. Parameters live outside the arena: they own their
+// values and gradients, and their gradients accumulate across backward() calls until an
+// optimiser (or zero_grad) clears them. See nn.h for a worked example.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <initializer_list>
+#include <memory>
+#include <new>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace indrive::nn {
+
+inline constexpr int kMaxRank = 4;
+
+// Shape of a row-major tensor with 0 (scalar) to 4 dimensions.
+struct Shape {
+  int rank = 0;
+  std::array<std::int64_t, kMaxRank> dims{};
+
+  Shape() = default;
+  // Builds a shape from its dimensions, e.g. Shape{16, 64, 64, 3}; every dimension must be > 0.
+  Shape(std::initializer_list<std::int64_t> d);
+  // Dimension i; negative i counts from the end (-1 is the last dimension).
+  std::int64_t operator[](int i) const;
+  // Number of elements (1 for a scalar).
+  std::int64_t numel() const;
+  // Size of the last dimension (1 for a scalar); tensors are viewed as (rows, cols) matrices.
+  std::int64_t cols() const { return rank == 0 ? 1 : dims[rank - 1]; }
+  // Product of all dimensions but the last.
+  std::int64_t rows() const { return numel() / cols(); }
+  // Human-readable form such as "(16, 64, 3)", for error messages.
+  std::string str() const;
+  bool operator==(const Shape& other) const;
+  bool operator!=(const Shape& other) const { return !(*this == other); }
+};
+
+using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using MatrixMap = Eigen::Map<RowMatrix>;
+using ConstMatrixMap = Eigen::Map<const RowMatrix>;
+
+namespace detail {
+
+// 64-byte aligned storage, so that parameter buffers have the same alignment in every run
+// (Eigen's kernels peel loops by alignment, which changes the rounding of sums).
+template <typename T>
+struct AlignedAllocator {
+  using value_type = T;
+  AlignedAllocator() = default;
+  template <typename U>
+  AlignedAllocator(const AlignedAllocator<U>&) {}
+  T* allocate(std::size_t n) {
+    return static_cast<T*>(::operator new(n * sizeof(T), std::align_val_t(64)));
+  }
+  void deallocate(T* p, std::size_t) { ::operator delete(p, std::align_val_t(64)); }
+  template <typename U>
+  bool operator==(const AlignedAllocator<U>&) const {
+    return true;
+  }
+};
+using AlignedFloats = std::vector<float, AlignedAllocator<float>>;
+
+struct Node;
+// Reverse-mode rule of one op: reads node.grad and adds into the grads of node.in[...].
+using BackwardFn = void (*)(Node& node);
+
+// One value in the graph. Trivially destructible: nodes live in the arena and die on reset.
+struct Node {
+  Shape shape;
+  float* value = nullptr;
+  float* grad = nullptr;  // allocated (zeroed) when a gradient first flows into the node
+  bool requires_grad = false;
+  bool persistent = false;  // a parameter leaf: grad is owned by the Parameter
+  BackwardFn backward = nullptr;
+  Node* in[3] = {nullptr, nullptr, nullptr};
+  float* saved = nullptr;  // op-specific buffer kept for backward (e.g. LayerNorm 1/std)
+  float fparam[4] = {0, 0, 0, 0};
+  std::int64_t iparam[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+};
+
+}  // namespace detail
+
+// Handle to a tensor in a Graph (or to a Parameter's leaf). Copying copies the handle only.
+class Tensor {
+ public:
+  Tensor() = default;
+  explicit Tensor(detail::Node* node) : node_(node) {}
+
+  // True when the handle refers to a tensor.
+  bool defined() const { return node_ != nullptr; }
+  // Shape of the tensor.
+  const Shape& shape() const { return node_->shape; }
+  // Number of elements.
+  std::int64_t numel() const { return node_->shape.numel(); }
+  // Rows of the (rows, cols) matrix view: product of all dimensions but the last.
+  std::int64_t rows() const { return node_->shape.rows(); }
+  // Size of the last dimension.
+  std::int64_t cols() const { return node_->shape.cols(); }
+  // Dimension i (negative counts from the end).
+  std::int64_t dim(int i) const { return node_->shape[i]; }
+  // Contiguous row-major values; writable so that inputs can be filled in place.
+  float* data() const { return node_->value; }
+  // Values as a span of numel() floats.
+  std::span<float> values() const { return {node_->value, static_cast<size_t>(numel())}; }
+  // Gradient after backward(), or nullptr when no gradient reached this tensor.
+  const float* grad() const { return node_->grad; }
+  // True when gradients flow to this tensor (it depends on a parameter or a grad leaf).
+  bool requires_grad() const { return node_->requires_grad; }
+  // The value of a one-element tensor.
+  float item() const;
+  // (rows, cols) row-major Eigen view of the values.
+  MatrixMap matrix() const { return MatrixMap(node_->value, rows(), cols()); }
+  // The underlying node (for op implementations).
+  detail::Node* node() const { return node_; }
+
+ private:
+  detail::Node* node_ = nullptr;
+};
+
+// Records ops of one thread and owns the memory of their results. Not thread-safe: each
+// thread uses its own graph (current_graph() is thread-local).
+class Graph {
+ public:
+  Graph();
+  ~Graph();
+  Graph(const Graph&) = delete;
+  Graph& operator=(const Graph&) = delete;
+
+  // Runs reverse mode from a one-element loss: gradients accumulate into every tensor and
+  // parameter the loss depends on. Call at most once per recorded graph.
+  void backward(Tensor loss);
+  // Forgets every tensor of this step and rewinds the arena; memory is kept for the next step
+  // (after the first steps the arena is one block large enough for a whole step).
+  void reset();
+  // True unless a NoGradGuard is active: ops record backward rules only when enabled.
+  bool grad_enabled() const { return grad_enabled_; }
+  // Bytes currently handed out by the arena (values, gradients, nodes).
+  std::size_t arena_used_bytes() const;
+  // Bytes the arena holds from the system.
+  std::size_t arena_capacity_bytes() const;
+  // Number of system allocations the arena has made since construction (for allocation tests).
+  std::size_t arena_system_allocations() const { return system_allocations_; }
+  // Number of nodes recorded since the last reset.
+  std::size_t num_nodes() const { return num_nodes_; }
+
+  // Allocates n floats (64-byte aligned, uninitialised) that live until reset().
+  float* alloc(std::int64_t n);
+  // Allocates n zeroed floats that live until reset().
+  float* alloc_zeroed(std::int64_t n);
+  // Creates a node with an uninitialised value buffer of the given shape.
+  detail::Node* new_node(const Shape& shape);
+  // Creates a node whose value aliases `value` (views such as reshape and stop_gradient).
+  detail::Node* new_view_node(const Shape& shape, float* value);
+  // Makes `node` the result of an op with inputs `in` and backward rule `fn`: it records the
+  // node when grad mode is on and some input requires a gradient.
+  void record(detail::Node* node, detail::BackwardFn fn, std::initializer_list<detail::Node*> in);
+
+ private:
+  friend class NoGradGuard;
+  struct Block {
+    std::unique_ptr<std::byte[]> memory;
+    std::size_t size = 0;
+    std::size_t used = 0;
+  };
+  void* alloc_bytes(std::size_t bytes);
+
+  std::vector<Block> blocks_;
+  std::size_t high_water_ = 0;
+  std::size_t system_allocations_ = 0;
+  std::size_t num_nodes_ = 0;
+  std::vector<detail::Node*> tape_;
+  bool grad_enabled_ = true;
+};
+
+// The calling thread's current graph; ops allocate their results here.
+Graph& current_graph();
+
+// Disables gradient recording on the current graph for its lifetime (inference in actors).
+class NoGradGuard {
+ public:
+  NoGradGuard();
+  ~NoGradGuard();
+  NoGradGuard(const NoGradGuard&) = delete;
+  NoGradGuard& operator=(const NoGradGuard&) = delete;
+
+ private:
+  bool previous_;
+};
+
+// A new tensor of the given shape with unspecified values, in the current graph.
+Tensor empty(const Shape& shape);
+// A new tensor filled with zeros.
+Tensor zeros(const Shape& shape);
+// A new tensor filled with `value`.
+Tensor full(const Shape& shape, float value);
+// A new tensor holding a copy of `values` (numel(shape) floats).
+Tensor constant(const Shape& shape, std::span<const float> values);
+// A new leaf that receives a gradient in backward() (inputs of gradient checks).
+Tensor grad_leaf(const Shape& shape, std::span<const float> values);
+
+// A trainable tensor with a name; owns its value and gradient. Not movable, because graph
+// nodes point at it: create parameters through ParamGroup::add.
+class Parameter {
+ public:
+  Parameter(std::string name, const Shape& shape);
+  Parameter(const Parameter&) = delete;
+  Parameter& operator=(const Parameter&) = delete;
+
+  // Full name, unique within its group, e.g. "enc.conv0.w".
+  const std::string& name() const { return name_; }
+  // Shape of the parameter.
+  const Shape& shape() const { return node_.shape; }
+  // Number of elements.
+  std::int64_t numel() const { return node_.shape.numel(); }
+  // The values (numel() floats, row-major).
+  std::span<float> value() { return value_; }
+  std::span<const float> value() const { return value_; }
+  // The accumulated gradient (numel() floats).
+  std::span<float> grad() { return grad_; }
+  std::span<const float> grad() const { return grad_; }
+  // Sets the gradient to zero.
+  void zero_grad();
+  // A handle to use the parameter in ops; gradients accumulate into grad().
+  Tensor tensor() { return Tensor(&node_); }
+
+ private:
+  std::string name_;
+  detail::AlignedFloats value_;
+  detail::AlignedFloats grad_;
+  detail::Node node_;
+};
+
+// A named, ordered set of parameters (e.g. "world_model", "actor", "critic"). Optimisers,
+// EMA copies and serialization work on groups.
+class ParamGroup {
+ public:
+  explicit ParamGroup(std::string name);
+  ParamGroup(const ParamGroup&) = delete;
+  ParamGroup& operator=(const ParamGroup&) = delete;
+
+  // Name of the group.
+  const std::string& name() const { return name_; }
+  // Creates a zero-initialised parameter; a duplicate name is a bug (checked).
+  Parameter& add(const std::string& name, const Shape& shape);
+  // The parameters in creation order.
+  const std::vector<std::unique_ptr<Parameter>>& params() const { return params_; }
+  // The parameter with this name, or nullptr.
+  Parameter* find(const std::string& name) const;
+  // Total number of scalars over all parameters.
+  std::int64_t numel() const;
+  // Zeroes every gradient of the group.
+  void zero_grad();
+
+ private:
+  std::string name_;
+  std::vector<std::unique_ptr<Parameter>> params_;
+};
+
+// Small, fast, platform-independent random generator (xoshiro256**), so runs with a fixed
+// seed give identical numbers everywhere.
+class Rng {
+ public:
+  // Seeds the four state words from `seed` with splitmix64.
+  explicit Rng(std::uint64_t seed = 0);
+  // Next 64 random bits.
+  std::uint64_t next_u64();
+  // Uniform in [0, 1).
+  float uniform();
+  // Standard normal (Box-Muller).
+  float normal();
+  // Uniform integer in [0, n).
+  std::int64_t below(std::int64_t n);
+
+ private:
+  std::uint64_t s_[4];
+};
+
+// Sets the number of threads used by the engine (OpenMP loops; large GEMMs are split over
+// them, small ops stay on the calling thread). With one thread and a fixed seed, results are
+// bitwise reproducible.
+void set_threads(int threads);
+// The number of threads set by set_threads (default: OpenMP's default).
+int threads();
+
+}  // namespace indrive::nn
