@@ -1,0 +1,223 @@
+#include "indrive/common/agent/agent.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+
+#include "dot_env.h"
+#include "indrive/common/agent/policy.h"
+#include "testing.h"
+
+namespace indrive::agent {
+namespace {
+
+AgentConfig tiny_config(Phase phase = Phase::kPretrain, Method method = Method::kDisag) {
+  AgentConfig c = preset("tiny");
+  c.phase = phase;
+  c.intrinsic.method = method;
+  c.behavior.horizon = 5;  // short rollouts keep the unit tests fast
+  c.seed = 17;
+  return c;
+}
+
+ReplayBuffer dot_replay(bool rewards, int steps = 200) {
+  ReplayBuffer replay(
+      {.capacity = 5000, .height = 32, .width = 32, .has_rewards = rewards, .seed = 4});
+  synthetic::DotEnv env(32, 6);
+  synthetic::collect_random(env, replay, steps, 8);
+  return replay;
+}
+
+std::vector<float> values_of(const nn::ParamGroup& g) {
+  std::vector<float> out;
+  for (const auto& p : g.params()) out.insert(out.end(), p->value().begin(), p->value().end());
+  return out;
+}
+
+bool all_finite(const TrainMetrics& m) {
+  for (const auto& [name, value] : m)
+    if (!std::isfinite(value)) return false;
+  return true;
+}
+
+float metric(const TrainMetrics& m, const std::string& name) {
+  for (const auto& [key, value] : m)
+    if (key == name) return value;
+  ADD_FAILURE() << "no metric " << name;
+  return NAN;
+}
+
+TEST(Agent, PretrainStepsWithEachMethodAreFiniteAndRewardFree) {
+  nn::set_threads(1);
+  ReplayBuffer replay = dot_replay(false);
+  for (Method method : {Method::kDisag, Method::kIcm, Method::kRnd}) {
+    Agent agent(tiny_config(Phase::kPretrain, method));
+    const SequenceBatch batch = replay.sample(2, 8);
+    ASSERT_TRUE(batch.rewards.empty());
+    const TrainMetrics m = agent.train_step(batch);
+    EXPECT_TRUE(all_finite(m)) << to_string(method);
+    for (const auto& [name, value] : m) EXPECT_EQ(name.find("reward") == 0, false);
+    EXPECT_TRUE(std::isfinite(metric(m, "expl/reward")));
+    EXPECT_EQ(agent.train_steps(), 1);
+  }
+}
+
+TEST(Agent, RejectsRewardsInPretrainingAndTheirAbsenceInTaskPhases) {
+  ReplayBuffer with = dot_replay(true, 60), without = dot_replay(false, 60);
+  Agent pretrain(tiny_config(Phase::kPretrain));
+  EXPECT_THROW(pretrain.train_step(with.sample(1, 4)), AgentError);
+  Agent dreamer(tiny_config(Phase::kDreamer));
+  EXPECT_THROW(dreamer.train_step(without.sample(1, 4)), AgentError);
+}
+
+TEST(Agent, FinetuneLeavesFrozenPartsBitwiseUnchanged) {
+  nn::set_threads(1);
+  indrive::testing::TempDir dir;
+  {
+    // A pretrained checkpoint whose optimisers hold nonzero moments.
+    Agent pretrain(tiny_config(Phase::kPretrain));
+    ReplayBuffer replay = dot_replay(false);
+    for (int i = 0; i < 2; ++i) pretrain.train_step(replay.sample(2, 8));
+    pretrain.save_checkpoint(dir.path() / "pretrain.ckpt");
+  }
+  Agent agent(tiny_config(Phase::kFinetune));
+  agent.load_checkpoint(dir.path() / "pretrain.ckpt");
+  // The task actor starts as the pretrained exploration actor.
+  EXPECT_EQ(values_of(agent.task().actor_params()), values_of(agent.exploration().actor_params()));
+  const auto wm = values_of(agent.world_model().params());
+  const auto intrinsic = values_of(agent.intrinsic().params());
+  const auto expl_actor = values_of(agent.exploration().actor_params());
+  const auto expl_critic = values_of(agent.exploration().critic_params());
+  const auto reward = values_of(agent.world_model().reward_params());
+  const auto task_actor = values_of(agent.task().actor_params());
+  const auto task_critic = values_of(agent.task().critic_params());
+  ReplayBuffer replay = dot_replay(true);
+  for (int i = 0; i < 2; ++i) {
+    const TrainMetrics m = agent.train_step(replay.sample(2, 8));
+    EXPECT_TRUE(all_finite(m));
+  }
+  EXPECT_EQ(values_of(agent.world_model().params()), wm);
+  EXPECT_EQ(values_of(agent.intrinsic().params()), intrinsic);
+  EXPECT_EQ(values_of(agent.exploration().actor_params()), expl_actor);
+  EXPECT_EQ(values_of(agent.exploration().critic_params()), expl_critic);
+  EXPECT_NE(values_of(agent.world_model().reward_params()), reward);
+  EXPECT_NE(values_of(agent.task().actor_params()), task_actor);
+  EXPECT_NE(values_of(agent.task().critic_params()), task_critic);
+}
+
+TEST(Agent, DreamerTrainsTheWorldModelAndRewardHead) {
+  nn::set_threads(1);
+  Agent agent(tiny_config(Phase::kDreamer));
+  const auto wm = values_of(agent.world_model().params());
+  const auto reward = values_of(agent.world_model().reward_params());
+  const auto intrinsic = values_of(agent.intrinsic().params());
+  ReplayBuffer replay = dot_replay(true);
+  const TrainMetrics m = agent.train_step(replay.sample(2, 8));
+  EXPECT_TRUE(all_finite(m));
+  EXPECT_TRUE(std::isfinite(metric(m, "wm/reward")));
+  EXPECT_NE(values_of(agent.world_model().params()), wm);
+  EXPECT_NE(values_of(agent.world_model().reward_params()), reward);
+  EXPECT_EQ(values_of(agent.intrinsic().params()), intrinsic);
+}
+
+TEST(Agent, CheckpointResumesExactly) {
+  nn::set_threads(1);
+  indrive::testing::TempDir dir;
+  ReplayBuffer replay = dot_replay(false);
+  const SequenceBatch b1 = replay.sample(2, 8), b2 = replay.sample(2, 8);
+  Agent a(tiny_config(Phase::kPretrain, Method::kIcm));
+  a.train_step(b1);
+  a.save_checkpoint(dir.path() / "a.ckpt");
+  AgentConfig other_seed = tiny_config(Phase::kPretrain, Method::kIcm);
+  other_seed.seed = 99;  // different initial parameters and RNG: all must come from the file
+  Agent b(other_seed);
+  b.load_checkpoint(dir.path() / "a.ckpt");
+  EXPECT_EQ(b.train_steps(), 1);
+  // Every loss of the next step depends on parameters, optimiser-free state, normalisers and
+  // the RNG: all must be restored for the metrics to match bitwise.
+  const TrainMetrics ma = a.train_step(b2);
+  const TrainMetrics mb = b.train_step(b2);
+  EXPECT_EQ(ma, mb);
+  // After the update, parameters agree to the last bits; bias-gradient reductions may round
+  // differently with another buffer alignment, so a relative 1e-5 is allowed.
+  auto ga = a.groups(), gb = b.groups();
+  ASSERT_EQ(ga.size(), gb.size());
+  for (std::size_t i = 0; i < ga.size(); ++i) {
+    for (std::size_t k = 0; k < ga[i]->params().size(); ++k) {
+      const auto& pa = *ga[i]->params()[k];
+      const auto& pb = *gb[i]->params()[k];
+      for (std::size_t j = 0; j < pa.value().size(); ++j) {
+        ASSERT_NEAR(pa.value()[j], pb.value()[j], 1e-9 + 1e-5 * std::abs(pa.value()[j]))
+            << pa.name() << " of " << ga[i]->name();
+      }
+    }
+  }
+}
+
+TEST(Agent, CheckpointErrorsAreTyped) {
+  indrive::testing::TempDir dir;
+  Agent a(tiny_config());
+  const auto path = dir.path() / "a.ckpt";
+  a.save_checkpoint(path);
+  Agent other_method(tiny_config(Phase::kPretrain, Method::kRnd));
+  EXPECT_THROW(other_method.load_checkpoint(path), AgentError);
+  EXPECT_THROW(a.load_checkpoint(dir.path() / "missing.ckpt"), AgentError);
+  {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(100);
+    f.put('\x55');
+  }
+  EXPECT_THROW(a.load_checkpoint(path), AgentError);
+}
+
+TEST(Policy, ActsFromSnapshotBytesOnly) {
+  nn::set_threads(1);
+  Agent agent(tiny_config());
+  ReplayBuffer replay = dot_replay(false);
+  agent.train_step(replay.sample(2, 8));
+  Policy policy(tiny_config());
+  policy.load_snapshot(agent.snapshot());
+  synthetic::DotEnv env(32, 1);
+  PolicyState state;
+  std::vector<std::uint8_t> frame = env.reset();
+  for (int t = 0; t < 5; ++t) {
+    const int a = policy.act(frame, t == 0, state, true);
+    ASSERT_GE(a, 0);
+    ASSERT_LT(a, kNumActions);
+    float total = 0;
+    for (float p : policy.last_probs()) total += p;
+    EXPECT_NEAR(total, 1.0f, 1e-5);
+    EXPECT_EQ(state.deter.size(), 128u);
+    env.step(a);
+    frame = env.frame();
+  }
+  // The snapshot's actor is the one that acts: on the posterior state that act() returns,
+  // the agent's exploration actor gives the same probabilities, and mode acting takes the max.
+  PolicyState fresh;
+  const int mode = policy.act(frame, true, fresh, false);
+  const std::vector<float> policy_probs = policy.last_probs();
+  nn::current_graph().reset();
+  nn::Tensor feat = nn::concat(
+      {nn::constant(nn::Shape{1, 128}, fresh.deter), nn::constant(nn::Shape{1, 256}, fresh.stoch)});
+  nn::Tensor probs = agent.exploration().action_probs(feat);
+  for (int a = 0; a < kNumActions; ++a) {
+    EXPECT_NEAR(probs.data()[a], policy_probs[a], 1e-6);
+    EXPECT_LE(policy_probs[a], policy_probs[mode]);
+  }
+  // Snapshots of another size are rejected.
+  AgentConfig bigger = tiny_config();
+  bigger.world_model.deter = 64;
+  Policy mismatched(bigger);
+  EXPECT_THROW(mismatched.load_snapshot(agent.snapshot()), nn::SerializationError);
+}
+
+TEST(Policy, RandomPolicyCoversAllActions) {
+  RandomPolicy random(3);
+  std::vector<int> counts(kNumActions, 0);
+  for (int i = 0; i < 9000; ++i) counts[random.act()]++;
+  for (int c : counts) EXPECT_NEAR(c, 1000, 150);
+}
+
+}  // namespace
+}  // namespace indrive::agent
