@@ -1,1 +1,12 @@
-# Tests of the envserver net area.
+# Tests of the envserver net area: road network, towns, routes, static scene, rewards.
+indrive_test(envserver_net_test
+  SOURCES net_parse_test.cc net_query_test.cc net_town_test.cc reward_test.cc
+          routes_route_test.cc routes_derive_test.cc routes_file_test.cc
+          scene_build_test.cc net_draw_test.cc routes_feasibility_test.cc
+  LIBS indrive::envserver
+  LABEL unit TIMEOUT 120)
+# The geometry helpers are private to the library; the tests use them to measure curvature.
+target_include_directories(envserver_net_test PRIVATE ${PROJECT_SOURCE_DIR}/envserver/src)
+target_compile_definitions(envserver_net_test PRIVATE
+  INDRIVE_NETCONVERT_FOR_TESTS="${NETCONVERT_BINARY}")
+indrive_bench(envserver_net_bench SOURCES net_query_bench.cc LIBS indrive::envserver ARGS town01)

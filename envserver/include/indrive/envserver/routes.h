@@ -101,6 +101,7 @@ class Route {
   std::vector<Eigen::Vector2d> line_;  // dense centre line
   std::vector<double> line_s_m_;       // arc length per centre-line point
   std::vector<double> line_width_m_;   // lane width per centre-line point
+  std::vector<int> line_lane_;         // lane of the segment starting at each point
   std::vector<Waypoint> waypoints_;
   double length_m_ = 0.0;
 };

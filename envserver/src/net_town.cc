@@ -1,0 +1,266 @@
+// Town resolution: built-in towns, user networks, OpenDRIVE conversion, procedural grids, and
+// the content-hashed cache of converted networks.
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include "indrive/common/checksum.h"
+#include "indrive/common/log.h"
+#include "indrive/envserver/town.h"
+
+extern char** environ;
+
+namespace indrive::env {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Conversion options shared by every network we build: right-hand traffic, no U-turns, no XML
+// validation (SUMO_HOME data may be absent), and node coordinates kept as written. The lane
+// centres of netconvert's turns are curves, tightest mid-turn: with a junction corner radius of
+// 10 m no turn is tighter than ~7.6 m, within reach of the ego's ~7.55 m turning radius
+// (wheelbase 2.9 m, wheel angle 0.3 * 70 deg); 6 m would give right turns of ~5.2 m.
+// clang-format off
+const std::vector<std::string> kCommonOptions = {
+    "--xml-validation", "never",
+    "--no-turnarounds", "true",
+    "--default.lanewidth", "3.5",
+    "--default.junctions.radius", "10",
+    "--junctions.corner-detail", "5",
+    "--junctions.internal-link-detail", "8",
+    "--offset.disable-normalization", "true",
+    "--no-warnings", "true",
+};
+// clang-format on
+// Bump when the conversion changes in a way the options above do not show.
+constexpr const char* kCacheVersion = "net-v1";
+
+std::string read_file(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw MapError("cannot read '" + path.string() + "'");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+std::string env_or_empty(const char* name) {
+  const char* value = std::getenv(name);
+  return value != nullptr ? std::string(value) : std::string();
+}
+
+fs::path data_dir(const TownOptions& options) {
+  if (!options.data_dir.empty()) return options.data_dir;
+  if (auto env = env_or_empty("INDRIVE_ENV_DATA_DIR"); !env.empty()) return env;
+  return INDRIVE_ENV_DATA_DIR;
+}
+
+fs::path cache_dir(const TownOptions& options) {
+  if (!options.cache_dir.empty()) return options.cache_dir;
+  if (auto env = env_or_empty("INDRIVE_CACHE_DIR"); !env.empty()) return env;
+  if (auto env = env_or_empty("XDG_CACHE_HOME"); !env.empty()) return fs::path(env) / "indrive";
+  if (auto env = env_or_empty("HOME"); !env.empty()) return fs::path(env) / ".cache" / "indrive";
+  return fs::temp_directory_path() / "indrive-cache";
+}
+
+fs::path program(const fs::path& configured, const char* built_in) {
+  return configured.empty() ? fs::path(built_in) : configured;
+}
+
+// Runs a program with arguments (no shell), its output going to `log_path`; returns the exit
+// status, or -1 when it could not be started.
+int run_program(const std::vector<std::string>& argv, const fs::path& log_path) {
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_path.c_str(),
+                                   O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+  std::vector<char*> args;
+  for (const auto& arg : argv) args.push_back(const_cast<char*>(arg.c_str()));
+  args.push_back(nullptr);
+  pid_t pid = 0;
+  const int spawned = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawned != 0) return -1;
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return -1;
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string tail_of(const fs::path& log_path, size_t max_chars = 1500) {
+  std::ifstream in(log_path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  std::string all = text.str();
+  if (all.size() > max_chars) all = "..." + all.substr(all.size() - max_chars);
+  return all;
+}
+
+// Builds `output` with `argv` + ["-o", tmp] unless a file with the same content hash exists;
+// the hash covers the inputs' bytes and the arguments. Safe when several processes race.
+fs::path convert_cached(const std::string& stem, const std::vector<fs::path>& inputs,
+                        std::vector<std::string> argv, const TownOptions& options) {
+  std::uint32_t hash = indrive::crc32(kCacheVersion, std::char_traits<char>::length(kCacheVersion));
+  for (const auto& input : inputs) {
+    const std::string bytes = read_file(input);
+    hash = indrive::crc32(bytes.data(), bytes.size(), hash);
+  }
+  for (const auto& arg : argv) {
+    // Paths are not part of the key: the same content converts to the same network.
+    if (std::find(inputs.begin(), inputs.end(), fs::path(arg)) != inputs.end()) continue;
+    hash = indrive::crc32(arg.data(), arg.size() + 1, hash);
+  }
+  char hex[9];
+  std::snprintf(hex, sizeof hex, "%08x", hash);
+  const fs::path dir = cache_dir(options);
+  const fs::path output = dir / (stem + "-" + hex + ".net.xml");
+  std::error_code ec;
+  if (fs::is_regular_file(output, ec)) return output;
+
+  fs::create_directories(dir, ec);
+  if (ec) {
+    throw MapError("cannot create the network cache folder '" + dir.string() + "' (" +
+                   ec.message() + "); set INDRIVE_CACHE_DIR to a writable folder");
+  }
+  // Unique temporary names, renamed into place: concurrent actors never see half a file.
+  std::random_device random;
+  const std::string token = std::to_string(::getpid()) + "-" + std::to_string(random() % 100000);
+  const fs::path temporary = dir / (stem + "-" + hex + "." + token + ".tmp.net.xml");
+  const fs::path log_path = dir / (stem + "-" + hex + "." + token + ".log");
+  argv.push_back("-o");
+  argv.push_back(temporary.string());
+  INDRIVE_LOG(kInfo, "env") << "converting " << stem << " with " << argv[0] << " into " << output;
+  const int status = run_program(argv, log_path);
+  if (status != 0 || !fs::is_regular_file(temporary, ec)) {
+    const std::string log = tail_of(log_path);
+    fs::remove(temporary, ec);
+    fs::remove(log_path, ec);
+    if (status == -1) {
+      throw MapError("could not run '" + argv[0] +
+                     "'; install SUMO (Debian package sumo) or set the program path");
+    }
+    throw MapError("'" + argv[0] + "' failed to convert " + stem + " (exit " +
+                   std::to_string(status) + "): " + log);
+  }
+  fs::remove(log_path, ec);
+  fs::rename(temporary, output, ec);
+  if (ec) {
+    throw MapError("cannot move the converted network into '" + output.string() +
+                   "': " + ec.message());
+  }
+  return output;
+}
+
+bool ends_with(const std::string& text, const std::string& suffix) {
+  return text.size() >= suffix.size() &&
+         text.compare(text.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+std::string known_specs() {
+  return "a built-in town (town01, town02), a .net.xml file, an .xodr file or grid:<seed>";
+}
+
+}  // namespace
+
+std::vector<std::string> builtin_towns() { return {"town01", "town02"}; }
+
+fs::path resolve_town_network(const std::string& spec, const TownOptions& options) {
+  const auto towns = builtin_towns();
+  const fs::path netconvert = program(options.netconvert, INDRIVE_NETCONVERT_BINARY);
+  std::error_code ec;
+
+  if (std::find(towns.begin(), towns.end(), spec) != towns.end()) {
+    const fs::path folder = data_dir(options) / "towns";
+    const fs::path nodes = folder / (spec + ".nod.xml");
+    const fs::path edges = folder / (spec + ".edg.xml");
+    for (const auto& file : {nodes, edges}) {
+      if (!fs::is_regular_file(file, ec)) {
+        throw MapError("built-in town source '" + file.string() +
+                       "' is missing; set INDRIVE_ENV_DATA_DIR to the envserver/data folder");
+      }
+    }
+    std::vector<std::string> argv = {netconvert.string(), "--node-files", nodes.string(),
+                                     "--edge-files", edges.string()};
+    argv.insert(argv.end(), kCommonOptions.begin(), kCommonOptions.end());
+    return convert_cached(spec, {nodes, edges}, argv, options);
+  }
+
+  if (spec.rfind("grid:", 0) == 0) {
+    // A procedural grid: the seed picks the number and length of blocks. Attached stubs turn
+    // the grid's corners into crossings, so no corner is a tight L-bend.
+    unsigned long seed = 0;
+    try {
+      seed = std::stoul(spec.substr(5));
+    } catch (const std::exception&) {
+      throw MapError("bad procedural town '" + spec + "': expected grid:<seed>, e.g. grid:7");
+    }
+    std::mt19937 rng(static_cast<std::uint32_t>(seed));
+    const int nx = 3 + static_cast<int>(rng() % 3);
+    const int ny = 3 + static_cast<int>(rng() % 3);
+    const int x_length = 70 + static_cast<int>(rng() % 61);
+    const int y_length = 70 + static_cast<int>(rng() % 61);
+    std::vector<std::string> argv = {
+        program(options.netgenerate, INDRIVE_NETGENERATE_BINARY).string(),
+        "--grid",
+        "--grid.x-number",
+        std::to_string(nx),
+        "--grid.y-number",
+        std::to_string(ny),
+        "--grid.x-length",
+        std::to_string(x_length),
+        "--grid.y-length",
+        std::to_string(y_length),
+        "--grid.attach-length",
+        "25",
+        "--default.lanenumber",
+        "1",
+        "--default-junction-type",
+        "priority"};
+    argv.insert(argv.end(), kCommonOptions.begin(), kCommonOptions.end());
+    return convert_cached("grid" + std::to_string(seed), {}, argv, options);
+  }
+
+  const fs::path path(spec);
+  if (ends_with(spec, ".net.xml")) {
+    if (!fs::is_regular_file(path, ec)) {
+      throw MapError("road network file '" + spec + "' does not exist; give " + known_specs());
+    }
+    return path;
+  }
+  if (ends_with(spec, ".xodr")) {
+    if (!fs::is_regular_file(path, ec)) {
+      throw MapError("OpenDRIVE file '" + spec + "' does not exist; give " + known_specs());
+    }
+    std::vector<std::string> argv = {netconvert.string(), "--opendrive-files", path.string()};
+    argv.insert(argv.end(), kCommonOptions.begin(), kCommonOptions.end());
+    return convert_cached(path.stem().string(), {path}, argv, options);
+  }
+  throw MapError("unknown town '" + spec + "'; give " + known_specs());
+}
+
+Town load_town(const std::string& spec, const TownOptions& options) {
+  const fs::path net_file = resolve_town_network(spec, options);
+  RoadNetwork net = RoadNetwork::load(net_file);
+  std::vector<RouteSpec> specs;
+  const auto towns = builtin_towns();
+  if (std::find(towns.begin(), towns.end(), spec) != towns.end()) {
+    specs = read_route_file(data_dir(options) / "routes" / (spec + ".routes.yaml"));
+  } else {
+    specs = derive_routes(net);
+  }
+  std::vector<Route> routes = build_routes(net, specs);
+  std::vector<SpawnPoint> spawns = spawn_points(net);
+  return Town{spec, net_file, std::move(net), std::move(routes), std::move(spawns)};
+}
+
+}  // namespace indrive::env

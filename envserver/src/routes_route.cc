@@ -1,0 +1,272 @@
+// Route construction from a spec, projection onto the route, and the progress tracker.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "indrive/common/check.h"
+#include "indrive/envserver/routes.h"
+#include "net_geometry.h"
+
+namespace indrive::env {
+
+namespace {
+
+// Picks the connection from edge `from` to edge `to`, preferring one that starts on
+// `preferred_lane` (continuing the lane the route is on), then the rightmost lane.
+const Connection* find_connection(const RoadNetwork& net, int from, int to, int preferred_lane) {
+  const Connection* best = nullptr;
+  for (int lane : net.edge(from).lanes) {
+    for (int c : net.connections_from(lane)) {
+      const Connection& connection = net.connections()[c];
+      if (net.lane(connection.to_lane).edge != to) continue;
+      if (connection.direction == TurnDirection::kTurnaround && from != to) continue;
+      if (best == nullptr) best = &connection;
+      if (connection.from_lane == preferred_lane && best->from_lane != preferred_lane) {
+        best = &connection;
+      }
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : spec_(spec) {
+  INDRIVE_CHECK(spacing_m > 0.0) << "waypoint spacing must be positive";
+  if (spec.edges.empty()) throw RouteError("route '" + spec.name + "' has no edges");
+  std::vector<int> edges;
+  for (const std::string& id : spec.edges) {
+    const int edge = net.find_edge(id);
+    if (edge < 0 || net.edge(edge).internal || net.edge(edge).lanes.empty()) {
+      throw RouteError("route '" + spec.name + "': edge '" + id +
+                       "' is not a drivable edge of network '" + net.source().string() +
+                       "'; fix the route file or derive the routes from the network");
+    }
+    edges.push_back(edge);
+  }
+  if (spec.loop && edges.size() < 2) {
+    throw RouteError("route '" + spec.name + "': a loop needs at least two edges");
+  }
+
+  // Lane sequence: each edge's lane, then the internal lanes crossing the next junction.
+  const size_t hops = spec.loop ? edges.size() : edges.size() - 1;
+  int lane = net.edge(edges[0]).lanes.front();
+  std::vector<int> edge_lanes(edges.size(), -1);
+  std::vector<const Connection*> connections;
+  for (size_t i = 0; i < hops; ++i) {
+    const int from = edges[i];
+    const int to = edges[(i + 1) % edges.size()];
+    const Connection* connection = find_connection(net, from, to, lane);
+    if (connection == nullptr) {
+      throw RouteError("route '" + spec.name + "': no connection from edge '" + spec.edges[i] +
+                       "' to edge '" + spec.edges[(i + 1) % edges.size()] +
+                       "'; consecutive edges must meet at a junction with a permitted move");
+    }
+    edge_lanes[i] = connection->from_lane;
+    connections.push_back(connection);
+    turns_.push_back(connection->direction);
+    lane = connection->to_lane;
+  }
+  if (!spec.loop) edge_lanes.back() = lane;
+  for (size_t i = 0; i < edges.size(); ++i) {
+    lanes_.push_back(edge_lanes[i]);
+    if (i < connections.size()) {
+      for (int internal : net.crossing_lanes(*connections[i])) lanes_.push_back(internal);
+    }
+  }
+  if (spec.loop) lanes_.push_back(edge_lanes[0]);  // closes the centre line; dropped below
+
+  // Dense centre line through all lanes; a loop ends where it started.
+  for (size_t k = 0; k < lanes_.size(); ++k) {
+    const Lane& l = net.lane(lanes_[k]);
+    const bool closing = spec.loop && k + 1 == lanes_.size();
+    const size_t count = closing ? 1 : l.shape.size();
+    for (size_t p = 0; p < count; ++p) {
+      if (!line_.empty() && (l.shape[p] - line_.back()).norm() < 1e-3) continue;
+      line_.push_back(l.shape[p]);
+      line_width_m_.push_back(l.width_m);
+      line_lane_.push_back(lanes_[k]);
+    }
+  }
+  if (spec.loop) lanes_.pop_back();
+  INDRIVE_CHECK(line_.size() >= 2) << "route '" << spec.name << "' has a degenerate centre line";
+  line_s_m_ = geometry::arc_lengths(line_);
+  length_m_ = line_s_m_.back();
+
+  // Waypoints evenly spread at about spacing_m; a loop does not repeat its start.
+  const int intervals = std::max(1, static_cast<int>(std::lround(length_m_ / spacing_m)));
+  const double step = length_m_ / intervals;
+  const int count = spec.loop ? intervals : intervals + 1;
+  for (int i = 0; i < count; ++i) {
+    const double s = std::min(i * step, length_m_);
+    double heading = 0.0;
+    Waypoint waypoint;
+    waypoint.position = geometry::point_at(line_, line_s_m_, s, &heading);
+    waypoint.heading_rad = heading;
+    waypoint.s_m = s;
+    auto it = std::upper_bound(line_s_m_.begin(), line_s_m_.end(), s);
+    const size_t segment =
+        std::min<size_t>(std::max<ptrdiff_t>(it - line_s_m_.begin() - 1, 0), line_.size() - 2);
+    waypoint.lane = line_lane_[segment];
+    waypoint.lane_width_m = line_width_m_[segment];
+    waypoints_.push_back(waypoint);
+  }
+}
+
+Pose2 Route::start_pose() const { return pose_at(0.0); }
+
+Pose2 Route::pose_at(double s_m) const {
+  if (is_loop()) {
+    s_m = std::fmod(s_m, length_m_);
+    if (s_m < 0.0) s_m += length_m_;
+  }
+  double heading = 0.0;
+  const Eigen::Vector2d p = geometry::point_at(line_, line_s_m_, s_m, &heading);
+  return Pose2{p.x(), p.y(), heading};
+}
+
+RoutePoint Route::project(const Eigen::Vector2d& point, double s_hint_m, double window_m) const {
+  // Arc-length intervals to search (two when a loop's window wraps past the start).
+  std::vector<std::pair<double, double>> windows;
+  if (window_m < 0.0 || (is_loop() && 2.0 * window_m >= length_m_)) {
+    windows.emplace_back(0.0, length_m_);
+  } else if (is_loop()) {
+    double lo = std::fmod(s_hint_m - window_m, length_m_);
+    if (lo < 0.0) lo += length_m_;
+    const double hi = lo + 2.0 * window_m;
+    windows.emplace_back(lo, std::min(hi, length_m_));
+    if (hi > length_m_) windows.emplace_back(0.0, hi - length_m_);
+  } else {
+    windows.emplace_back(std::max(0.0, s_hint_m - window_m),
+                         std::min(length_m_, s_hint_m + window_m));
+  }
+
+  RoutePoint best;
+  double best_distance = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i + 1 < line_.size(); ++i) {
+    const double s0 = line_s_m_[i];
+    const double s1 = line_s_m_[i + 1];
+    if (s1 <= s0) continue;
+    const Eigen::Vector2d direction = (line_[i + 1] - line_[i]) / (s1 - s0);
+    for (const auto& [a, b] : windows) {
+      const double lo = std::max(s0, a);
+      const double hi = std::min(s1, b);
+      if (lo > hi) continue;
+      // Closest point of the part of this segment inside the window.
+      const double t = std::clamp((point - line_[i]).dot(direction), lo - s0, hi - s0);
+      const Eigen::Vector2d closest = line_[i] + t * direction;
+      const Eigen::Vector2d offset = point - closest;
+      const double distance = offset.norm();
+      if (distance < best_distance) {
+        best_distance = distance;
+        const double cross = direction.x() * offset.y() - direction.y() * offset.x();
+        best.s_m = s0 + t;
+        best.lateral_m = cross >= 0.0 ? distance : -distance;
+        best.heading_rad = std::atan2(direction.y(), direction.x());
+        best.lane_width_m = line_width_m_[i];
+      }
+    }
+  }
+  if (is_loop() && best.s_m >= length_m_) best.s_m -= length_m_;
+  return best;
+}
+
+int Route::next_waypoint(double s_m) const {
+  if (is_loop()) {
+    s_m = std::fmod(s_m, length_m_);
+    if (s_m < 0.0) s_m += length_m_;
+  }
+  auto it = std::upper_bound(waypoints_.begin(), waypoints_.end(), s_m,
+                             [](double s, const Waypoint& w) { return s < w.s_m; });
+  if (it == waypoints_.end()) return is_loop() ? 0 : static_cast<int>(waypoints_.size()) - 1;
+  return static_cast<int>(it - waypoints_.begin());
+}
+
+// --- tracker -----------------------------------------------------------------------------------
+
+namespace {
+// A vehicle moves well under a metre per 0.1 s step; this window keeps the projection local.
+constexpr double kTrackWindowM = 15.0;
+}  // namespace
+
+RouteTracker::RouteTracker(const Route& route, double finish_tolerance_m)
+    : route_(&route), finish_tolerance_m_(finish_tolerance_m) {
+  reset();
+}
+
+void RouteTracker::reset(double s_m) {
+  start_s_m_ = s_m;
+  s_m_ = s_m;
+  progress_m_ = 0.0;
+  best_progress_m_ = 0.0;
+  last_ = RouteStep{};
+  last_.next_waypoint = route_->next_waypoint(s_m);
+}
+
+namespace {
+// Number of waypoints at or behind unwrapped arc length u (laps count on loops).
+long waypoints_behind(const Route& route, double u) {
+  const auto& waypoints = route.waypoints();
+  const long n = static_cast<long>(waypoints.size());
+  double within = u;
+  long laps = 0;
+  if (route.is_loop()) {
+    laps = static_cast<long>(std::floor(u / route.length_m()));
+    within = u - laps * route.length_m();
+  }
+  const long count = std::upper_bound(waypoints.begin(), waypoints.end(), within,
+                                      [](double s, const Waypoint& w) { return s < w.s_m; }) -
+                     waypoints.begin();
+  return laps * n + count;
+}
+}  // namespace
+
+RouteStep RouteTracker::update(const Pose2& pose) {
+  const Route& route = *route_;
+  const RoutePoint at = route.project({pose.x_m, pose.y_m}, s_m_, kTrackWindowM);
+  double delta = at.s_m - s_m_;
+  if (route.is_loop()) {
+    // The shorter way round is the true motion.
+    if (delta > 0.5 * route.length_m()) delta -= route.length_m();
+    if (delta < -0.5 * route.length_m()) delta += route.length_m();
+  }
+  s_m_ = at.s_m;
+  progress_m_ += delta;
+
+  RouteStep step;
+  step.progress_m = progress_m_;
+  step.delta_m = delta;
+  if (progress_m_ > best_progress_m_) {
+    step.waypoints_passed =
+        static_cast<int>(waypoints_behind(route, start_s_m_ + progress_m_) -
+                         waypoints_behind(route, start_s_m_ + best_progress_m_));
+    best_progress_m_ = progress_m_;
+  }
+  step.next_waypoint = route.next_waypoint(s_m_);
+  step.lateral_m = at.lateral_m;
+  step.distance_to_route_m = std::abs(at.lateral_m);
+  const double remaining = route.is_loop() ? route.length_m() - progress_m_
+                                           : route.length_m() - (start_s_m_ + progress_m_);
+  step.finished = remaining <= finish_tolerance_m_;
+  last_ = step;
+  return step;
+}
+
+const Route& find_route(const std::vector<Route>& routes, std::string_view name) {
+  for (const Route& route : routes) {
+    if (route.name() == name) return route;
+  }
+  std::string known;
+  for (const Route& route : routes) known += (known.empty() ? "" : ", ") + route.name();
+  throw RouteError("unknown route '" + std::string(name) +
+                   "'; known routes: " + (known.empty() ? std::string("none") : known));
+}
+
+std::vector<Route> build_routes(const RoadNetwork& net, const std::vector<RouteSpec>& specs) {
+  std::vector<Route> routes;
+  routes.reserve(specs.size());
+  for (const RouteSpec& spec : specs) routes.emplace_back(net, spec);
+  return routes;
+}
+
+}  // namespace indrive::env

@@ -1,0 +1,62 @@
+// Route derivation for networks without a route file.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "net_test_network.h"
+#include "net_test_town.h"
+
+namespace indrive::env {
+namespace {
+
+std::set<std::string> edge_set(const RouteSpec& spec) {
+  return {spec.edges.begin(), spec.edges.end()};
+}
+
+TEST(RoutesDeriveTest, FindsTheSmallestBlockLoopsAndTheLongestCorridor) {
+  const RoadNetwork& net = testing::cached_town("town02").net;
+  const std::vector<RouteSpec> specs = derive_routes(net);
+  ASSERT_EQ(specs.size(), 4u);
+  for (size_t i = 0; i < specs.size(); ++i) EXPECT_EQ(specs[i].name, kRouteNames[i]);
+  // The cross road x = 70 m is the longest corridor without a bend: 200 m, three edges.
+  EXPECT_FALSE(specs[0].loop);
+  EXPECT_EQ(specs[0].edges.size(), 3u);
+  // The smallest block (x 140..200, y 150..200) clockwise and counter-clockwise.
+  EXPECT_EQ(edge_set(specs[1]), (std::set<std::string>{"N2_E2", "E2_M4", "M4_N2"}));
+  EXPECT_EQ(edge_set(specs[2]), (std::set<std::string>{"E2_N2", "N2_M4", "M4_E2"}));
+  // The derived specs build valid routes of the right kinds.
+  const std::vector<Route> routes = build_routes(net, specs);
+  for (TurnDirection turn : routes[1].turns()) EXPECT_FALSE(is_left_turn(turn));
+  for (TurnDirection turn : routes[2].turns()) EXPECT_FALSE(is_right_turn(turn));
+  bool right = false;
+  bool left = false;
+  for (TurnDirection turn : routes[3].turns()) {
+    right |= is_right_turn(turn);
+    left |= is_left_turn(turn);
+  }
+  EXPECT_TRUE(right && left);
+  // Loops start on their longest edge, for a run-up before the first turn.
+  for (size_t r = 1; r < routes.size(); ++r) {
+    double longest = 0.0;
+    for (const std::string& id : specs[r].edges) {
+      longest = std::max(longest, net.lane(net.edge(net.find_edge(id)).lanes[0]).length_m);
+    }
+    EXPECT_DOUBLE_EQ(net.lane(net.edge(net.find_edge(specs[r].edges[0])).lanes[0]).length_m,
+                     longest);
+  }
+}
+
+TEST(RoutesDeriveTest, NetworkWithoutLoopsNamesWhatIsMissing) {
+  const RoadNetwork net = RoadNetwork::parse(testing::kHandNetwork, "hand");
+  try {
+    derive_routes(net);
+    FAIL() << "expected RouteError";
+  } catch (const RouteError& error) {
+    EXPECT_THAT(error.what(), ::testing::HasSubstr("right_loop left_loop two_turn"));
+    EXPECT_THAT(error.what(), ::testing::Not(::testing::HasSubstr("straight")));
+  }
+}
+
+}  // namespace
+}  // namespace indrive::env
