@@ -6,6 +6,7 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include "indrive/common/check.h"
@@ -590,6 +591,43 @@ void Config::write_yaml(const std::filesystem::path& path) const {
   std::ofstream out(path);
   out << to_yaml();
   if (!out) throw ConfigError("cannot write the resolved config to '" + path.string() + "'");
+}
+
+CommandLine parse_command_line(int argc, const char* const* argv,
+                               const std::map<std::string, std::string>& aliases) {
+  CommandLine line;
+  for (int i = 1; i < argc; ++i) {
+    std::string flag = argv[i];
+    std::optional<std::string> value;
+    if (const auto eq = flag.find('='); flag.rfind("--", 0) == 0 && eq != std::string::npos) {
+      value = flag.substr(eq + 1);
+      flag = flag.substr(0, eq);
+    }
+    const bool owned =
+        flag == "--config" || flag == "--preset" || flag == "--set" || aliases.contains(flag);
+    if (flag == "--help" || flag == "-h") {
+      line.help = true;
+      continue;
+    }
+    if (!owned) {
+      line.rest.push_back(argv[i]);
+      continue;
+    }
+    if (!value) {
+      if (i + 1 >= argc) throw ConfigError("flag " + flag + " needs a value");
+      value = argv[++i];
+    }
+    if (flag == "--config") {
+      line.sources.file = *value;
+    } else if (flag == "--preset") {
+      line.sources.preset = *value;
+    } else if (flag == "--set") {
+      line.sources.overrides.push_back(*value);
+    } else {
+      line.sources.overrides.push_back(aliases.at(flag) + "=" + *value);
+    }
+  }
+  return line;
 }
 
 }  // namespace indrive::config

@@ -29,6 +29,39 @@ class SinkConsumer : public eprosima::fastdds::dds::LogConsumer {
   }
 };
 
+std::filesystem::path canonical_or_same(const std::filesystem::path& path) {
+  std::error_code error;
+  auto result = std::filesystem::weakly_canonical(path, error);
+  return error ? path : result;
+}
+
+// Fast DDS keeps every loaded profile per process and, when a second file defines a profile
+// name again, logs an error but keeps the first definition and reports success. Every
+// shipped file uses the same names, so a second file would silently not take effect: refuse
+// it, including a FASTRTPS_DEFAULT_PROFILES_FILE that Fast DDS loads on its own.
+// Called before loading (commit = false) and after a successful load (commit = true), so a
+// file that fails to load does not block a good one later.
+void claim_profiles_file(const std::filesystem::path& path, bool commit) {
+  static std::mutex mutex;
+  static std::filesystem::path claimed;
+  const auto wanted = canonical_or_same(path);
+  const char* from_env = std::getenv(kProfilesEnvVar);
+  if (from_env != nullptr && *from_env != '\0' && canonical_or_same(from_env) != wanted) {
+    throw DdsError(std::string("FASTRTPS_DEFAULT_PROFILES_FILE names '") + from_env +
+                   "' but the dds-profiles argument names '" + path.string() +
+                   "'; Fast DDS would load both and keep the first one's profiles. Unset the "
+                   "variable or pass the same file");
+  }
+  std::lock_guard<std::mutex> lock(mutex);
+  if (claimed.empty()) {
+    if (commit) claimed = wanted;
+  } else if (claimed != wanted) {
+    throw DdsError("this process already uses DDS profiles from '" + claimed.string() +
+                   "'; it cannot switch to '" + path.string() +
+                   "' (Fast DDS keeps the first definition of each profile name)");
+  }
+}
+
 }  // namespace
 
 void route_fastdds_log() {
@@ -47,6 +80,12 @@ void declare_config(config::Schema& schema) {
                   "XML profiles file (deploy/dds/*.xml); empty: FASTRTPS_DEFAULT_PROFILES_FILE")
       .add_string("dds.participant_profile", "indrive_participant",
                   "<participant> profile in the XML profiles file");
+}
+
+ParticipantOptions participant_options(const config::Config& config) {
+  return {.domain_id = config.get<int>("dds.domain_id"),
+          .profiles_file = config.get<std::string>("dds.profiles_file"),
+          .participant_profile = config.get<std::string>("dds.participant_profile")};
 }
 
 std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
@@ -78,6 +117,7 @@ Participant::Participant(const ParticipantOptions& options)
     throw DdsError("DDS domain id " + std::to_string(domain_id_) +
                    " is out of range; use 0..232 (UDP port numbers are derived from it)");
   }
+  claim_profiles_file(profiles_file_, /*commit=*/false);
   auto* factory = DomainParticipantFactory::get_instance();
   // Loading the same file twice is harmless: Fast DDS remembers the files it has parsed.
   if (factory->load_XML_profiles_file(profiles_file_.string()) != ReturnCode_t::RETCODE_OK) {
@@ -85,6 +125,7 @@ Participant::Participant(const ParticipantOptions& options)
                    "' could not be loaded (malformed XML, an unknown element, or a profile name "
                    "already loaded from another file); the log above has Fast DDS's reason");
   }
+  claim_profiles_file(profiles_file_, /*commit=*/true);
   eprosima::fastdds::dds::DomainParticipantQos qos;
   if (factory->get_participant_qos_from_profile(options.participant_profile, qos) !=
       ReturnCode_t::RETCODE_OK) {

@@ -15,7 +15,7 @@ using namespace std::chrono_literals;
 
 // Every test here loads the same profiles file: Fast DDS keeps loaded profiles per process,
 // and two files that define the same profile names cannot both be loaded in one process.
-std::string profiles() { return testing::source_path("deploy/dds/single_host.xml").string(); }
+std::string profiles() { return testing::source_path("deploy/dds/default.xml").string(); }
 
 template <typename F>
 std::string error_of(F&& make) {
@@ -40,7 +40,7 @@ TEST(DdsParticipant, ProfilesFileComesFromEnvironmentWhenNoFlag) {
   EXPECT_NE(message.find("FASTRTPS_DEFAULT_PROFILES_FILE"), std::string::npos) << message;
   ::setenv(kProfilesEnvVar, profiles().c_str(), 1);
   EXPECT_EQ(resolve_profiles_file("").string(), profiles());
-  const std::string other = testing::source_path("deploy/dds/default.xml").string();
+  const std::string other = testing::source_path("deploy/dds/single_host.xml").string();
   EXPECT_EQ(resolve_profiles_file(other).string(), other) << "an explicit path wins";
   ::unsetenv(kProfilesEnvVar);
 }
@@ -68,6 +68,21 @@ TEST(DdsParticipant, UnknownProfilesAreNamed) {
   const auto domain_message =
       error_of([] { Participant participant({.domain_id = 300, .profiles_file = profiles()}); });
   EXPECT_NE(domain_message.find("0..232"), std::string::npos) << domain_message;
+}
+
+TEST(DdsParticipant, SecondProfilesFileInOneProcessIsRefused) {
+  Participant first({.domain_id = testing::unique_domain_id(), .profiles_file = profiles()});
+  const auto message = error_of([] {
+    Participant second({.profiles_file = testing::source_path("deploy/dds/single_host.xml")});
+  });
+  EXPECT_NE(message.find("already uses DDS profiles from"), std::string::npos) << message;
+
+  // Fast DDS loads the environment's file by itself: a different explicit file is refused too.
+  ::setenv(kProfilesEnvVar, testing::source_path("deploy/dds/single_host.xml").c_str(), 1);
+  const auto env_message = error_of([] { Participant third({.profiles_file = profiles()}); });
+  ::unsetenv(kProfilesEnvVar);
+  EXPECT_NE(env_message.find("FASTRTPS_DEFAULT_PROFILES_FILE names"), std::string::npos)
+      << env_message;
 }
 
 TEST(DdsParticipant, LateReaderGetsTransientLocalAllowance) {

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <string>
 #include <thread>
@@ -79,9 +80,9 @@ bool wait_for_file(const std::filesystem::path& path, std::chrono::seconds timeo
   return true;
 }
 
-void run_transfer(const std::string& profile) {
-  TempDir dir("indrive-dds-transfer");
-  const std::string profiles = source_path("deploy/dds/" + profile).string();
+// Runs publisher and late-joining receiver over the profiles file `profiles`; `profile` names
+// it in the log.
+void run_transfer(const std::string& profile, const std::string& profiles, const TempDir& dir) {
   const std::string domain = std::to_string(unique_domain_id());
   const std::string run_id = "transfer-" + std::to_string(::getpid());
   const std::string peer = INDRIVE_DDS_PEER;
@@ -134,9 +135,33 @@ void run_transfer(const std::string& profile) {
   ::testing::Test::RecordProperty("wire_mb_per_s", std::to_string(sent.at("wire_mb_per_s")));
 }
 
+void run_transfer(const std::string& profile) {
+  TempDir dir("indrive-dds-transfer");
+  run_transfer(profile, source_path("deploy/dds/" + profile).string(), dir);
+}
+
 TEST(DdsTransfer, DefaultUdpProfile) { run_transfer("default.xml"); }
 
 TEST(DdsTransfer, SingleHostSharedMemoryProfile) { run_transfer("single_host.xml"); }
+
+// Discovery through a server (no multicast): the shipped file with the server's port moved to
+// one of this test's own, so parallel runs do not share a server.
+TEST(DdsTransfer, DiscoveryServerProfile) {
+  TempDir dir("indrive-dds-transfer");
+  const std::string port = std::to_string(20000 + (::getpid() * 13 + unique_domain_id()) % 20000);
+  std::ifstream in(source_path("deploy/dds/discovery_server.xml"));
+  std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string shipped_port = "<port>11811</port>";
+  const auto at = xml.find(shipped_port);
+  ASSERT_NE(at, std::string::npos) << "discovery_server.xml no longer names port 11811";
+  xml.replace(at, shipped_port.size(), "<port>" + port + "</port>");
+  const auto profiles = dir.path() / "discovery_server.xml";
+  std::ofstream(profiles) << xml;
+
+  Child server({INDRIVE_DISCOVERY_SERVER, "-i", "0", "-l", "127.0.0.1", "-p", port});
+  ASSERT_TRUE(server.started());
+  run_transfer("discovery_server.xml", profiles.string(), dir);
+}
 
 }  // namespace
 }  // namespace indrive::testing

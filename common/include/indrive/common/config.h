@@ -157,4 +157,17 @@ class Config {
   std::map<std::string, Value, std::less<>> values_;
 };
 
+// The configuration flags every executable shares, parsed from argv.
+struct CommandLine {
+  Sources sources;                  // --config FILE, --preset NAME, --set KEY=VALUE (repeatable)
+  bool help = false;                // --help or -h
+  std::vector<std::string> rest{};  // arguments this parser does not own, in order
+};
+
+// Parses --config, --preset, --set (each also as --flag=value) and --help; `aliases` maps extra
+// flags to keys, e.g. {"--dds-profiles", "dds.profiles_file"} turns `--dds-profiles F` into
+// `--set dds.profiles_file=F`. Throws ConfigError when a flag lacks its value.
+CommandLine parse_command_line(int argc, const char* const* argv,
+                               const std::map<std::string, std::string>& aliases = {});
+
 }  // namespace indrive::config

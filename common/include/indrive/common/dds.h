@@ -37,8 +37,9 @@
 #include "indrive/common/log.h"
 
 namespace indrive::config {
+class Config;
 class Schema;
-}
+}  // namespace indrive::config
 
 namespace indrive::dds {
 
@@ -62,6 +63,14 @@ struct ParticipantOptions {
 // Declares the dds.* configuration keys (domain_id, profiles_file, participant_profile).
 void declare_config(config::Schema& schema);
 
+// Participant options from the dds.* keys of a resolved config.
+ParticipantOptions participant_options(const config::Config& config);
+
+// The command-line flag that names the profiles file, as an alias of dds.profiles_file for
+// config::parse_command_line.
+inline const std::pair<std::string, std::string> kProfilesFlag{"--dds-profiles",
+                                                               "dds.profiles_file"};
+
 // Returns the profiles file to load: explicit_path if not empty, else the environment
 // variable's value; throws DdsError when neither is set or the file does not exist.
 std::filesystem::path resolve_profiles_file(const std::string& explicit_path);
@@ -79,8 +88,8 @@ class Writer {
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
-  // Publishes one sample; returns false when it could not be queued in time (a KEEP_ALL
-  // history stayed full for the profile's max_blocking_time), so the caller may retry.
+  // Publishes one sample; returns false when it could not be queued, e.g. a KEEP_ALL history
+  // is full because readers have not acknowledged enough yet (back-pressure): retry later.
   bool write(const T& sample) { return writer_->write(const_cast<T*>(&sample)); }
 
   // Number of readers currently matched.
