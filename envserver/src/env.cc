@@ -111,8 +111,9 @@ StepResult Env::step(int action) {
   sumo_->place_ego(kEgoId, ego_.pose, ego_.speed_mps);
   sumo_->step();
   read_vehicles();
-  traffic_->update(ego_.pose, vehicles_);
   watch.lap(timing_.sumo_s);
+  traffic_->update(ego_.pose, vehicles_);
+  watch.lap(timing_.traffic_s);
 
   // Events, route progress, reward.
   bool sumo_collision = false;

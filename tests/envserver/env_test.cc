@@ -90,8 +90,9 @@ TEST(Env, TrafficIsKeptAtTheConfiguredDensity) {
     StepResult r = env.reset({.route = "right_loop", .density = density, .traffic_seed = 4});
     WaypointFollower follower(*env.route(), env.config().ego, {.target_speed_mps = 5.0});
     follower.reset();
-    int min_near = 1000;
     int max_near = 0;
+    double sum_near = 0.0;
+    int samples = 0;
     for (int i = 0; i < 300 && !r.is_last; ++i) {
       r = env.step(follower.act(env.ego()));
       if (i < 50) continue;  // insertion takes a few steps
@@ -99,10 +100,14 @@ TEST(Env, TrafficIsKeptAtTheConfiguredDensity) {
       for (const Box& b : env.traffic_boxes()) {
         if (std::hypot(b.pose.x_m - r.ego.pose.x_m, b.pose.y_m - r.ego.pose.y_m) <= 150.0) ++near;
       }
-      min_near = std::min(min_near, near);
       max_near = std::max(max_near, near);
+      sum_near += near;
+      ++samples;
     }
-    EXPECT_GE(min_near, density - 2) << "density " << density;
+    ASSERT_GT(samples, 100) << "episode ended early: " << event_names(r.events);
+    // Vehicles leaving the radius are replaced within a few steps (insertion delay, a few spawns
+    // per step), so the count dips briefly; on average it holds.
+    EXPECT_NEAR(sum_near / samples, density, 1.0) << "density " << density;
     EXPECT_LE(max_near, density + 2) << "density " << density;
   }
 }

@@ -15,6 +15,11 @@ struct Case {
   double speed_mps;
 };
 
+// Readable parameter in test output.
+void PrintTo(const Case& c, std::ostream* os) {
+  *os << c.town << "/" << c.route << " at " << c.speed_mps << " m/s";
+}
+
 std::string case_name(const ::testing::TestParamInfo<Case>& info) {
   return info.param.town + "_" + info.param.route + "_" +
          std::to_string(static_cast<int>(info.param.speed_mps)) + "mps";

@@ -15,3 +15,5 @@ indrive_test(follower_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/follower_test.cc
   LIBS indrive::envserver LABEL smoke TIMEOUT 600)
 indrive_bench(env_bench SOURCES ${CMAKE_CURRENT_LIST_DIR}/env_bench.cc LIBS indrive::envserver
   ARGS --town town01 --steps 3000)
+indrive_test(traffic_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/traffic_test.cc
+  LIBS indrive::envserver indrive_sim_test_net)

@@ -176,9 +176,10 @@ int run_episode(std::map<std::string, std::string> flags) {
               event_names(result.events).c_str(),
               !is_failure(result.events) ? "success" : "failure", result.route_progress_m);
   if (!config.task.empty()) std::printf(", return %.2f", reward_sum);
-  std::printf("\n%.0f steps/s (sumo %.0f us, render %.0f us, events %.0f us per step)\n",
-              t.steps / (t.sumo_s + t.render_s + t.events_s), 1e6 * t.sumo_s / t.steps,
-              1e6 * t.render_s / t.steps, 1e6 * t.events_s / t.steps);
+  std::printf(
+      "\n%.0f steps/s (sumo %.0f us, traffic %.0f us, render %.0f us, events %.0f us per step)\n",
+      t.steps / (t.sumo_s + t.traffic_s + t.render_s + t.events_s), 1e6 * t.sumo_s / t.steps,
+      1e6 * t.traffic_s / t.steps, 1e6 * t.render_s / t.steps, 1e6 * t.events_s / t.steps);
   if (video) std::printf("video: %s (%d frames)\n", video_path.c_str(), video->frames_written());
   return 0;
 }

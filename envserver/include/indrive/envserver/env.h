@@ -67,9 +67,10 @@ struct StepResult {
 
 // Seconds spent per part since construction, for the benchmark.
 struct EnvTiming {
-  double sumo_s = 0.0;    // SUMO step, vehicle readout, traffic upkeep
-  double render_s = 0.0;  // camera
-  double events_s = 0.0;  // events, route tracking, reward
+  double sumo_s = 0.0;     // ego placement, SUMO step, vehicle readout
+  double traffic_s = 0.0;  // traffic upkeep: removing far vehicles, spawning new ones
+  double render_s = 0.0;   // camera
+  double events_s = 0.0;   // events, route tracking, reward
   std::int64_t steps = 0;
 };
 
