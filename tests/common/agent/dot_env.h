@@ -1,4 +1,4 @@
-// A small synthetic image environment for learning tests: a 2x2 "vehicle" dot on a road
+// A small synthetic image environment for learning tests: a kDot x kDot "vehicle" on a road
 // background that moves under the chosen action (steer -> x, throttle index -> y), with a
 // rewarded goal region. Deterministic given its seed.
 #pragma once
@@ -14,12 +14,14 @@ namespace indrive::agent::synthetic {
 
 class DotEnv {
  public:
+  static constexpr int kDot = 12;  // side of the dot in pixels
+  static constexpr int kMove = 3;  // pixels per step
   DotEnv(int size, std::uint64_t seed, int episode_length = 20)
       : size_(size), episode_length_(episode_length), rng_(seed) {}
 
   // Starts an episode at a random position and returns its first frame.
   std::vector<std::uint8_t> reset() {
-    std::uniform_int_distribution<int> pos(2, size_ - 4);
+    std::uniform_int_distribution<int> pos(0, size_ - kDot);
     x_ = pos(rng_), y_ = pos(rng_), t_ = 0;
     return frame();
   }
@@ -27,8 +29,8 @@ class DotEnv {
   // maps to y moves {-1, 0, +1}. Returns the reward of arriving at the new position.
   float step(int action) {
     const int dx = action / 3 - 1, dy = action % 3 - 1;
-    x_ = std::clamp(x_ + 2 * dx, 0, size_ - 2);
-    y_ = std::clamp(y_ + 2 * dy, 0, size_ - 2);
+    x_ = std::clamp(x_ + kMove * dx, 0, size_ - kDot);
+    y_ = std::clamp(y_ + kMove * dy, 0, size_ - kDot);
     ++t_;
     return reward();
   }
@@ -37,8 +39,8 @@ class DotEnv {
   bool done() const { return t_ >= episode_length_; }
   std::vector<std::uint8_t> frame() const {
     std::vector<std::uint8_t> f(static_cast<std::size_t>(size_) * size_, 1);  // road
-    for (int dy = 0; dy < 2; ++dy)
-      for (int dx = 0; dx < 2; ++dx) f[(y_ + dy) * size_ + x_ + dx] = 4;  // vehicle
+    for (int dy = 0; dy < kDot; ++dy)
+      for (int dx = 0; dx < kDot; ++dx) f[(y_ + dy) * size_ + x_ + dx] = 4;  // vehicle
     return f;
   }
   int x() const { return x_; }

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "dot_env.h"
@@ -76,31 +77,86 @@ TEST(WorldModel, RewardHeadTrainsOnStopGradientFeatures) {
   EXPECT_GT(reward_grad, 0.0f);
 }
 
-TEST(WorldModel, LearnsTheDotEnvironment) {
-  // Thresholds: reconstruction error (summed over 32x32x3) falls by more than half within
-  // 150 updates, and the KL falls; seeds fixed.
+TEST(WorldModel, LearnsTheDotEnvironmentAndImaginesItOpenLoop) {
+  // Thresholds: the reconstruction error (summed over 32x32x3) falls below a tenth within
+  // 700 updates and the KL ends 10% below its peak; then, from 4 observed steps, 4 open-loop
+  // imagined frames (true actions, prior only) have less than 0.6 times the error of repeating the
+  // last observed frame. Seeds fixed; about 25 s on one core.
   nn::set_threads(1);
   nn::Rng rng(3);
   WorldModelConfig config = tiny_model();
   WorldModel wm(config, rng);
   nn::Adam adam(wm.params(), {.lr = 1e-3f, .eps = 1e-8f, .clip = 1000.0f});
-  ReplayBuffer replay = dot_replay(2000);
-  float first_recon = 0, last_recon = 0, first_kl = 0, last_kl = 0;
-  const int updates = 150;
+  ReplayBuffer replay = dot_replay(3000);
+  // KL is tracked in windows of 50 updates: it rises while the posterior starts to carry the
+  // dot's position, then falls as the prior learns to predict it.
+  const int updates = 700, window = 50;
+  std::vector<float> recon(updates / window, 0.0f), kl(updates / window, 0.0f);
   for (int i = 0; i < updates; ++i) {
     const SequenceBatch batch = replay.sample(8, 8);
     nn::current_graph().reset();
     WorldModelOutput out = wm.observe(batch, false, rng);
     nn::current_graph().backward(out.loss);
     adam.step();
-    if (i < 10) first_recon += out.recon / 10, first_kl += out.kl / 10;
-    if (i >= updates - 10) last_recon += out.recon / 10, last_kl += out.kl / 10;
+    recon[i / window] += out.recon / window;
+    kl[i / window] += out.kl / window;
   }
-  RecordProperty("first_recon", std::to_string(first_recon));
-  RecordProperty("last_recon", std::to_string(last_recon));
-  std::printf("recon %.2f -> %.2f, kl %.2f -> %.2f\n", first_recon, last_recon, first_kl, last_kl);
-  EXPECT_LT(last_recon, 0.5f * first_recon);
-  EXPECT_LT(last_kl, first_kl);
+  const float peak_kl = *std::max_element(kl.begin(), kl.end());
+  std::printf("recon %.2f -> %.2f, kl %.2f, peak %.2f -> %.2f\n", recon.front(), recon.back(),
+              kl.front(), peak_kl, kl.back());
+  EXPECT_LT(recon.back(), 0.1f * recon.front());
+  EXPECT_LT(kl.back(), 0.9f * peak_kl);
+
+  // Open loop: observe steps 0..3 of 16 windows, then roll the prior with the true actions.
+  nn::NoGradGuard no_grad;
+  nn::current_graph().reset();
+  const int b = 16, context = 4, horizon = 4;
+  SequenceBatch batch = replay.sample(b, context + horizon);
+  for (int i = 0; i < b; ++i) {
+    // Windows that cross an episode start would reset mid-way: treat them as one episode.
+    for (int t = 1; t < context + horizon; ++t) batch.is_first[i * (context + horizon) + t] = 0;
+  }
+  SequenceBatch observed = batch;
+  observed.length = context;
+  observed.frames.clear(), observed.actions.clear(), observed.is_first.clear();
+  observed.is_last.clear(), observed.is_terminal.clear();
+  const std::size_t pixels = 32 * 32;
+  for (int i = 0; i < b; ++i) {
+    for (int t = 0; t < context; ++t) {
+      const std::size_t k = i * (context + horizon) + t;
+      observed.frames.insert(observed.frames.end(), batch.frames.begin() + k * pixels,
+                             batch.frames.begin() + (k + 1) * pixels);
+      observed.actions.push_back(batch.actions[k]);
+      observed.is_first.push_back(batch.is_first[k]);
+      observed.is_last.push_back(0);
+      observed.is_terminal.push_back(0);
+    }
+  }
+  WorldModelOutput out = wm.observe(observed, false, rng);
+  RssmState state{nn::slice(out.deter, (context - 1) * b, context * b, 0),
+                  nn::slice(out.stoch, (context - 1) * b, context * b, 0)};
+  nn::Tensor real = WorldModel::batch_images(batch);  // ((context + horizon) * b, 32, 32, 3)
+  const std::int64_t frame_size = 32 * 32 * 3;
+  double model_error = 0, copy_error = 0;
+  for (int t = context; t < context + horizon; ++t) {
+    std::vector<int> actions(b);
+    for (int i = 0; i < b; ++i) actions[i] = batch.actions[i * (context + horizon) + t - 1];
+    state = wm.img_step(state, WorldModel::one_hot(actions), rng);
+    nn::Tensor imagined = wm.decode(WorldModel::features(state));
+    for (int i = 0; i < b; ++i) {
+      const float* truth = real.data() + (t * b + i) * frame_size;
+      const float* last_seen = real.data() + ((context - 1) * b + i) * frame_size;
+      const float* pred = imagined.data() + i * frame_size;
+      for (std::int64_t k = 0; k < frame_size; ++k) {
+        model_error += (pred[k] - truth[k]) * (pred[k] - truth[k]);
+        copy_error += (last_seen[k] - truth[k]) * (last_seen[k] - truth[k]);
+      }
+    }
+  }
+  model_error /= b * horizon, copy_error /= b * horizon;
+  std::printf("open-loop error per frame %.2f, copy-last-frame error %.2f\n", model_error,
+              copy_error);
+  EXPECT_LT(model_error, 0.6 * copy_error);
 }
 
 }  // namespace
