@@ -8,6 +8,7 @@
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/common/agent/policy.h"
+#include "indrive/common/check.h"
 #include "indrive/common/dds.h"
 #include "indrive/common/log.h"
 #include "indrive/common/nn/nn.h"

@@ -52,7 +52,7 @@ class ChunkBuilder {
   int size() const { return static_cast<int>(actions_.size()); }
   bool empty() const { return actions_.empty(); }
   // Policy version of the open chunk (valid when not empty).
-  std::uint64_t policy_version() const { return chunk_.policy_version; }
+  std::uint64_t policy_version() const { return chunk_.policy_version(); }
   // Returns the open chunk compressed and sealed, and starts the next one (chunk_seq + 1).
   // The open chunk must not be empty.
   msg::TrajectoryChunk take();
