@@ -114,17 +114,17 @@ struct Evaluator::Impl {
     auto snapshot = wait_for_snapshot(stop);
     if (snapshot == nullptr) {
       if (stop.load()) return 0;
-      INDRIVE_LOG(kError, "evaluator") << "no policy snapshot arrived within "
-                                       << config.config().get<double>("eval.snapshot_timeout_s")
-                                       << " s; is the learner of run '" << config.run_id()
-                                       << "' running on domain " << config.domain_id() << "?";
+      INDRIVE_LOG(kError, "evaluator")
+          << "no policy snapshot arrived within "
+          << config.config().get<double>("eval.snapshot_timeout_s") << " s; is the learner of run '"
+          << config.run_id() << "' running on domain " << config.domain_id() << "?";
       return 2;
     }
     policy.load_snapshot(snapshot->params());
     INDRIVE_LOG(kInfo, "evaluator")
-        << "evaluator " << index << "/" << count << " evaluates snapshot v"
-        << snapshot->version() << ", received "
-        << std::chrono::duration<double>(Clock::now() - start).count() << " s after start";
+        << "evaluator " << index << "/" << count << " evaluates snapshot v" << snapshot->version()
+        << ", received " << std::chrono::duration<double>(Clock::now() - start).count()
+        << " s after start";
 
     const auto episodes = grid.episodes_for(index, count);
     std::filesystem::create_directories(config.run_dir() / "eval");
@@ -139,11 +139,12 @@ struct Evaluator::Impl {
     int done = 0;
     for (const EpisodeSpec& spec : episodes) {
       if (stop.load()) break;
-      env::StepResult step = env->reset({.town = spec.town,
-                                         .route = spec.route,
-                                         .density = spec.density,
-                                         .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
-                                         .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
+      env::StepResult step =
+          env->reset({.town = spec.town,
+                      .route = spec.route,
+                      .density = spec.density,
+                      .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
+                      .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
       agent::PolicyState state;
       double episode_return = 0.0;
       while (!step.is_last && !stop.load()) {
@@ -172,10 +173,9 @@ struct Evaluator::Impl {
       record.success = (step.events & env::kDestination) != 0 && failures == 0;
       record.failure_reason = record.success ? "" : env::event_names(failures);
       record.steps = step.step;
-      record.route_completion =
-          route == nullptr || route->length_m() <= 0.0
-              ? 0.0
-              : std::min(1.0, step.route_progress_m / route->length_m());
+      record.route_completion = route == nullptr || route->length_m() <= 0.0
+                                    ? 0.0
+                                    : std::min(1.0, step.route_progress_m / route->length_m());
       record.episode_return = episode_return;
       csv.write(record);
 
@@ -199,8 +199,8 @@ struct Evaluator::Impl {
       result_writer->write(result);
       ++done;
     }
-    INDRIVE_LOG(kInfo, "evaluator") << "evaluator " << index << " ran " << done << " of "
-                                    << episodes.size() << " episodes";
+    INDRIVE_LOG(kInfo, "evaluator")
+        << "evaluator " << index << " ran " << done << " of " << episodes.size() << " episodes";
     result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
     return 0;
   }

@@ -14,8 +14,7 @@ void on_stop_signal(int) { g_stop.store(true); }
 void add_service_options(CLI::App& app, ServiceOptions& options, std::string& log_level) {
   app.add_option("--config", options.config_file, "run configuration (YAML)")
       ->check(CLI::ExistingFile);
-  app.add_option("--run-dir", options.run_dir, "run directory; its name is the run id")
-      ->required();
+  app.add_option("--run-dir", options.run_dir, "run directory; its name is the run id")->required();
   app.add_option("--domain", options.domain_id, "DDS domain id")->check(CLI::Range(0, 232));
   app.add_option("--dds-profile", options.dds_profile, "Fast DDS XML profiles file")
       ->check(CLI::ExistingFile);

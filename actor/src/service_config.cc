@@ -15,8 +15,8 @@ constexpr const char* kDefaultPreset = "cpu";
 
 // Agent keys whose text is not a number, with the values they may take.
 bool is_text_agent_key(const std::string& key) {
-  static const std::set<std::string> text_keys = {"preset", "phase", "task", "eval_sample",
-                                                  "intrinsic.method", "intrinsic.disag_reward"};
+  static const std::set<std::string> text_keys = {
+      "preset", "phase", "task", "eval_sample", "intrinsic.method", "intrinsic.disag_reward"};
   return text_keys.contains(key);
 }
 
@@ -165,9 +165,8 @@ env::EnvConfig ServiceConfig::env() const {
   const agent::AgentConfig agent = this->agent();
   env::EnvConfig env;
   env.town = config_.get<std::string>("env.town");
-  env.sumo.mode = config_.get<std::string>("env.sumo_mode") == "libtraci"
-                      ? env::SumoMode::kLibtraci
-                      : env::SumoMode::kLibsumo;
+  env.sumo.mode = config_.get<std::string>("env.sumo_mode") == "libtraci" ? env::SumoMode::kLibtraci
+                                                                          : env::SumoMode::kLibsumo;
   env.camera.width = agent.world_model.image;
   env.camera.height = agent.world_model.image;
   env.events.time_limit_steps = config_.get<int>("env.time_limit_steps");

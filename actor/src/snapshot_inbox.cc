@@ -4,8 +4,7 @@
 
 namespace indrive::actor {
 
-SnapshotInbox::SnapshotInbox(std::string run_id, std::string architecture,
-                             double request_after_s)
+SnapshotInbox::SnapshotInbox(std::string run_id, std::string architecture, double request_after_s)
     : run_id_(std::move(run_id)),
       architecture_(std::move(architecture)),
       request_after_(std::chrono::duration_cast<Clock::duration>(
@@ -16,8 +15,7 @@ bool SnapshotInbox::offer(const msg::PolicySnapshot& snapshot) {
   if (reason != dds::DropReason::kOk) {
     drops_.record(reason);
     INDRIVE_LOG(kWarn, "actor") << "dropped snapshot v" << snapshot.version() << " of run '"
-                                   << snapshot.run_id()
-                                   << "': " << dds::drop_reason_name(reason);
+                                << snapshot.run_id() << "': " << dds::drop_reason_name(reason);
     return false;
   }
   if (snapshot.architecture() != architecture_) {

@@ -23,8 +23,7 @@ double seconds_since(Clock::time_point start) {
 }
 
 double unix_time_s() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
 // The learner's pacing as this actor knows it. The allowance caps the total steps of all
@@ -42,8 +41,8 @@ class AllowanceGate {
     have_allowance_ = true;
     if (allowance.learner_epoch() != epoch_) {
       if (epoch_ != 0) {
-        INDRIVE_LOG(kInfo, "actor") << "learner restarted (epoch " << allowance.learner_epoch()
-                                    << ")";
+        INDRIVE_LOG(kInfo, "actor")
+            << "learner restarted (epoch " << allowance.learner_epoch() << ")";
       }
       epoch_ = allowance.learner_epoch();
     }
@@ -103,9 +102,8 @@ struct TrainingActor::Impl {
         rng(static_cast<std::uint64_t>(service.config().get<std::int64_t>("run.seed")) * 7919u +
             actor_id + 1) {
     // DDS first: a learner can see this actor while SUMO is still loading.
-    participant = std::make_unique<dds::Participant>(
-        dds::ParticipantOptions{.domain_id = service.domain_id(),
-                                .profiles_file = service.dds_profile()});
+    participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
+        .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
     chunk_writer = participant->make_writer<msg::TrajectoryChunk>();
     result_writer = participant->make_writer<msg::EpisodeResult>();
     heartbeat_writer = participant->make_writer<msg::Heartbeat>();
@@ -189,8 +187,8 @@ struct TrainingActor::Impl {
       policy.load_snapshot(snapshot->params());
     } catch (const std::exception& error) {
       ++stats.snapshots_rejected;
-      INDRIVE_LOG(kError, "actor") << "rejected snapshot v" << snapshot->version() << ": "
-                                   << error.what();
+      INDRIVE_LOG(kError, "actor")
+          << "rejected snapshot v" << snapshot->version() << ": " << error.what();
       stats.policy_version = snapshot->version();  // do not retry the same bytes
       return;
     }
@@ -237,8 +235,8 @@ struct TrainingActor::Impl {
     const cv::Mat& frame = result.observation;
     const bool first = result.is_first || restart_state;
     restart_state = false;
-    return policy.act(std::span<const std::uint8_t>(frame.data, frame.total()), first,
-                      policy_state, /*sample=*/true);
+    return policy.act(std::span<const std::uint8_t>(frame.data, frame.total()), first, policy_state,
+                      /*sample=*/true);
   }
 
   void publish_result(const env::StepResult& last, double episode_return) {
@@ -254,17 +252,17 @@ struct TrainingActor::Impl {
     result.traffic_seed(static_cast<std::uint32_t>(traffic_seed));
     result.spawn_seed(static_cast<std::uint32_t>(spawn_seed));
     // Without a route, an episode succeeds when it ends by the time limit alone.
-    const std::uint32_t failures =
-        route.empty() ? (last.events & env::kFailureEvents & ~env::kTimeLimit)
-                      : (last.events & env::kFailureEvents);
+    const std::uint32_t failures = route.empty()
+                                       ? (last.events & env::kFailureEvents & ~env::kTimeLimit)
+                                       : (last.events & env::kFailureEvents);
     result.success(route.empty() ? failures == 0 : (last.events & env::kDestination) != 0);
     result.failure_reason(failures == 0 ? "" : env::event_names(failures));
     result.steps(static_cast<std::uint32_t>(last.step));
     const env::Route* driven = env->route();
-    result.route_completion(driven == nullptr || driven->length_m() <= 0.0
-                                ? 0.0f
-                                : static_cast<float>(std::min(
-                                      1.0, last.route_progress_m / driven->length_m())));
+    result.route_completion(
+        driven == nullptr || driven->length_m() <= 0.0
+            ? 0.0f
+            : static_cast<float>(std::min(1.0, last.route_progress_m / driven->length_m())));
     result.episode_return(static_cast<float>(episode_return));
     dds::seal(result);
     result_writer->write(result);

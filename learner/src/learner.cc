@@ -31,8 +31,7 @@ double seconds_since(Clock::time_point start) {
 }
 
 double unix_time_s() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
 }  // namespace
@@ -81,10 +80,10 @@ struct Learner::Impl {
   explicit Impl(const actor::ServiceConfig& service)
       : config(service),
         agent_config(service.agent()),
-        run(RunDir::open_or_create(
-            service.run_dir().parent_path().empty() ? fs::path(".")
-                                                    : service.run_dir().parent_path(),
-            service.run_id())),
+        run(RunDir::open_or_create(service.run_dir().parent_path().empty()
+                                       ? fs::path(".")
+                                       : service.run_dir().parent_path(),
+                                   service.run_id())),
         checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
         agent(agent_config),
         replay({.capacity = agent_config.replay.capacity,
@@ -93,8 +92,8 @@ struct Learner::Impl {
                 .has_rewards = agent_config.phase != agent::Phase::kPretrain,
                 .seed = agent_config.replay.seed + agent_config.seed}),
         rate({.replay_ratio = service.config().get<double>("learner.replay_ratio"),
-              .steps_per_update = static_cast<std::int64_t>(agent_config.replay.batch) *
-                                  agent_config.replay.length,
+              .steps_per_update =
+                  static_cast<std::int64_t>(agent_config.replay.batch) * agent_config.replay.length,
               .prefill = agent_config.replay.prefill,
               // At least one chunk, so an actor can always finish the chunk it holds.
               .slack = std::max(service.config().get<std::int64_t>("learner.allowance_slack"),
@@ -128,19 +127,20 @@ struct Learner::Impl {
         [this](const msg::TrajectoryChunk& chunk) { on_chunk(chunk); });
     result_reader = participant->make_reader<msg::EpisodeResult>(
         [this](const msg::EpisodeResult& result) { on_result(result); });
-    request_reader = participant->make_reader<msg::SnapshotRequest>(
-        [this](const msg::SnapshotRequest& request) {
+    request_reader =
+        participant->make_reader<msg::SnapshotRequest>([this](const msg::SnapshotRequest& request) {
           if (dds::validate(request, config.run_id()) != dds::DropReason::kOk) return;
           republish_requested.store(true);
         });
     // A resumed learner hands out its restored policy at once, under a new version.
     if (stats.counters.updates > 0) publish_snapshot();
     publish_pacing(/*force=*/true);
-    INDRIVE_LOG(kInfo, "learner")
-        << "learner of run '" << config.run_id() << "' ready (epoch "
-        << stats.counters.learner_epoch << ", " << stats.counters.env_steps << " env steps, "
-        << stats.counters.updates << " updates, policy v" << stats.counters.policy_version
-        << "); architecture '" << actor::architecture_descriptor(agent_config) << "'";
+    INDRIVE_LOG(kInfo, "learner") << "learner of run '" << config.run_id() << "' ready (epoch "
+                                  << stats.counters.learner_epoch << ", "
+                                  << stats.counters.env_steps << " env steps, "
+                                  << stats.counters.updates << " updates, policy v"
+                                  << stats.counters.policy_version << "); architecture '"
+                                  << actor::architecture_descriptor(agent_config) << "'";
   }
 
   ~Impl() {
@@ -204,8 +204,8 @@ struct Learner::Impl {
     drops.record(reason);
     if (reason != dds::DropReason::kOk) {
       INDRIVE_LOG(kWarn, "learner")
-          << "dropped chunk " << chunk.chunk_seq() << " of actor " << chunk.actor_id()
-          << " (run '" << chunk.run_id() << "'): " << dds::drop_reason_name(reason);
+          << "dropped chunk " << chunk.chunk_seq() << " of actor " << chunk.actor_id() << " (run '"
+          << chunk.run_id() << "'): " << dds::drop_reason_name(reason);
       return;
     }
     std::lock_guard<std::mutex> lock(queue_mutex);
@@ -255,7 +255,8 @@ struct Learner::Impl {
   }
 
   void train_one() {
-    agent::SequenceBatch batch = replay.sample(agent_config.replay.batch, agent_config.replay.length);
+    agent::SequenceBatch batch =
+        replay.sample(agent_config.replay.batch, agent_config.replay.length);
     try {
       last_metrics = agent.train_step(batch);
     } catch (const std::exception& error) {
@@ -309,8 +310,8 @@ struct Learner::Impl {
   // how many steps arrived) at least every 100 ms.
   void publish_pacing(bool force) {
     const std::uint64_t allowed = allowance();
-    const bool changed = allowed != published_allowance ||
-                         stats.counters.env_steps != published_received;
+    const bool changed =
+        allowed != published_allowance || stats.counters.env_steps != published_received;
     if (!force && !(changed && seconds_since(last_pacing) > 0.005) &&
         seconds_since(last_pacing) < 0.1) {
       return;
@@ -346,11 +347,11 @@ struct Learner::Impl {
     if (elapsed < log_interval_s) return;
     const std::int64_t steps = stats.counters.env_steps - logged_steps;
     const std::int64_t updates = stats.counters.updates - logged_updates;
-    const double ratio =
-        stats.counters.env_steps > 0
-            ? static_cast<double>(stats.counters.updates) * rate.options().steps_per_update /
-                  static_cast<double>(stats.counters.env_steps)
-            : 0.0;
+    const double ratio = stats.counters.env_steps > 0
+                             ? static_cast<double>(stats.counters.updates) *
+                                   rate.options().steps_per_update /
+                                   static_cast<double>(stats.counters.env_steps)
+                             : 0.0;
     std::uint64_t episodes = 0, successes = 0, episode_steps = 0;
     {
       std::lock_guard<std::mutex> lock(queue_mutex);
@@ -388,10 +389,10 @@ struct Learner::Impl {
 
     std::ostringstream line;
     line.precision(3);
-    line << "steps " << stats.counters.env_steps << " | updates " << stats.counters.updates
-         << " | " << steps / elapsed << " steps/s | " << updates / elapsed << " upd/s | ratio "
-         << ratio << " | policy v" << stats.counters.policy_version << " lag " << lag
-         << " | dropped " << drops.dropped();
+    line << "steps " << stats.counters.env_steps << " | updates " << stats.counters.updates << " | "
+         << steps / elapsed << " steps/s | " << updates / elapsed << " upd/s | ratio " << ratio
+         << " | policy v" << stats.counters.policy_version << " lag " << lag << " | dropped "
+         << drops.dropped();
     int shown = 0;
     for (const auto& [name, value] : last_metrics) {
       if (name.find("loss") == std::string::npos || shown++ >= 4) continue;

@@ -16,9 +16,9 @@ RateLimiter::RateLimiter(RateOptions options) : options_(options) {
 
 std::int64_t RateLimiter::updates_due(std::int64_t received) const {
   if (received < options_.prefill || received <= 0) return 0;
-  return static_cast<std::int64_t>(std::floor(options_.replay_ratio *
-                                              static_cast<double>(received) /
-                                              static_cast<double>(options_.steps_per_update)));
+  return static_cast<std::int64_t>(
+      std::floor(options_.replay_ratio * static_cast<double>(received) /
+                 static_cast<double>(options_.steps_per_update)));
 }
 
 std::uint64_t RateLimiter::allowance(std::int64_t updates, std::int64_t fill_floor) const {

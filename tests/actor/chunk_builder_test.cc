@@ -54,8 +54,7 @@ TEST(ChunkBuilderTest, FullChunkIsSealedAndCarriesEveryStep) {
   const auto decoded = dds::decompress_frames(chunk);
   ASSERT_EQ(decoded.size(), 4u * kSide * kSide);
   for (int t = 0; t < 4; ++t) {
-    EXPECT_TRUE(std::equal(frames[t].begin(), frames[t].end(),
-                           decoded.begin() + t * kSide * kSide))
+    EXPECT_TRUE(std::equal(frames[t].begin(), frames[t].end(), decoded.begin() + t * kSide * kSide))
         << "frame " << t;
   }
   EXPECT_TRUE(builder.empty());

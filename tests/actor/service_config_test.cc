@@ -51,8 +51,8 @@ TEST(ServiceConfigTest, MistakesThrowWithTheKeyNamed) {
     EXPECT_NE(std::string(error.what()).find("learner.replay_ratio"), std::string::npos)
         << error.what();
   }
-  EXPECT_THROW(ServiceConfig::resolve({.run_dir = dir.path() / "r",
-                                       .overrides = {"agent.world_model.image=33"}}),
+  EXPECT_THROW(ServiceConfig::resolve(
+                   {.run_dir = dir.path() / "r", .overrides = {"agent.world_model.image=33"}}),
                agent::AgentConfigError);
   EXPECT_THROW(ServiceConfig::resolve({}), config::ConfigError);
 }

@@ -22,6 +22,8 @@ msg::SnapshotAnnounce announce(std::uint64_t version) {
   msg::SnapshotAnnounce a;
   a.run_id("run-a");
   a.version(version);
+  a.checksum(1);
+  a.size_bytes(100);
   dds::seal(a);
   return a;
 }

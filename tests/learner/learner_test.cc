@@ -6,8 +6,8 @@ namespace indrive::learner {
 namespace {
 
 TEST(LearnerCheckpointTest, PackedCountersAndAgentBytesRoundTrip) {
-  const LearnerCounters counters{.env_steps = 12345, .updates = 678, .policy_version = 9,
-                                 .learner_epoch = 2};
+  const LearnerCounters counters{
+      .env_steps = 12345, .updates = 678, .policy_version = 9, .learner_epoch = 2};
   const std::vector<std::uint8_t> agent_bytes = {0, 1, 2, '\n', 255, 7};
   const auto packed = pack_checkpoint(counters, agent_bytes);
   std::vector<std::uint8_t> restored_bytes;

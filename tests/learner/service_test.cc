@@ -1,5 +1,6 @@
 // The service as real processes: one learner and two actors on the tiny preset over DDS on
 // this host, watched by the test through its own DDS participant.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
@@ -32,8 +33,7 @@ class Child {
   Child(std::vector<std::string> argv, const fs::path& log) {
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND,
-                                     0644);
+    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
     posix_spawn_file_actions_adddup2(&actions, 1, 2);
     std::vector<char*> args;
     for (auto& arg : argv) args.push_back(arg.data());
@@ -137,8 +137,7 @@ learner:
   std::unique_ptr<Child> start_actor(int id) {
     auto argv = args("indrive-actor");
     argv.insert(argv.end(), {"--id", std::to_string(id)});
-    return std::make_unique<Child>(argv,
-                                   dir_.path() / ("actor-" + std::to_string(id) + ".log"));
+    return std::make_unique<Child>(argv, dir_.path() / ("actor-" + std::to_string(id) + ".log"));
   }
 
   std::string logs() {
@@ -169,13 +168,13 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
       {.domain_id = domain_,
        .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()});
   Observed seen;
-  auto chunk_reader = participant.make_reader<msg::TrajectoryChunk>(
-      [&](const msg::TrajectoryChunk& chunk) {
+  auto chunk_reader =
+      participant.make_reader<msg::TrajectoryChunk>([&](const msg::TrajectoryChunk& chunk) {
         std::lock_guard<std::mutex> lock(seen.mutex);
         seen.chunk_versions[chunk.actor_id()].push_back(chunk.policy_version());
       });
-  auto snapshot_reader = participant.make_reader<msg::PolicySnapshot>(
-      [&](const msg::PolicySnapshot& snapshot) {
+  auto snapshot_reader =
+      participant.make_reader<msg::PolicySnapshot>([&](const msg::PolicySnapshot& snapshot) {
         std::lock_guard<std::mutex> lock(seen.mutex);
         seen.newest_snapshot = std::max(seen.newest_snapshot, snapshot.version());
         seen.snapshot_bytes = snapshot.params().size();
@@ -208,14 +207,14 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
   }
 
   // A chunk of another run and a chunk with a bad checksum: dropped, counted, no crash.
-  actor::ChunkBuilder builder({.run_id = "another-run", .actor_id = 9, .height = 32,
-                               .width = 32, .chunk_length = 2});
+  actor::ChunkBuilder builder(
+      {.run_id = "another-run", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
   std::vector<std::uint8_t> frame(32 * 32, 1);
   builder.add({.frame = frame, .is_first = true, .episode_step = 0});
   builder.add({.frame = frame, .episode_step = 1});
   ASSERT_TRUE(chunk_writer->write(builder.take()));
-  actor::ChunkBuilder ours({.run_id = "itest", .actor_id = 9, .height = 32, .width = 32,
-                            .chunk_length = 2});
+  actor::ChunkBuilder ours(
+      {.run_id = "itest", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
   ours.add({.frame = frame, .is_first = true, .episode_step = 0});
   ours.add({.frame = frame, .episode_step = 1});
   auto corrupt = ours.take();

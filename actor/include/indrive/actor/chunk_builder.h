@@ -33,10 +33,10 @@ struct ActorStep {
   bool is_first = false;
   bool is_last = false;
   bool is_terminal = false;
-  std::uint32_t events = 0;       // EventBit bits of the step that produced the frame
-  std::optional<float> reward;    // extrinsic reward; required exactly when with_rewards
-  std::uint64_t episode_id = 0;   // per actor
-  std::uint64_t episode_step = 0; // step index within the episode
+  std::uint32_t events = 0;        // EventBit bits of the step that produced the frame
+  std::optional<float> reward;     // extrinsic reward; required exactly when with_rewards
+  std::uint64_t episode_id = 0;    // per actor
+  std::uint64_t episode_step = 0;  // step index within the episode
   std::uint64_t policy_version = 0;
 };
 

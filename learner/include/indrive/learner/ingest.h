@@ -6,7 +6,8 @@
 //
 //   DecodedChunk decoded;
 //   auto reason = decode_chunk(chunk, options, decoded);
-//   if (reason != dds::DropReason::kOk) drops.record(reason); else for (auto& s : decoded.steps) ...
+//   if (reason != dds::DropReason::kOk) drops.record(reason); else for (auto& s : decoded.steps)
+//   ...
 #pragma once
 
 #include <cstdint>

@@ -29,8 +29,8 @@ class CheckpointError : public std::runtime_error {
 
 // Counters a checkpoint carries besides the agent, so that a restart continues them.
 struct LearnerCounters {
-  std::int64_t env_steps = 0;      // steps received and stored
-  std::int64_t updates = 0;        // training steps done
+  std::int64_t env_steps = 0;  // steps received and stored
+  std::int64_t updates = 0;    // training steps done
   std::uint64_t policy_version = 0;
   std::uint64_t learner_epoch = 0;  // starts of the learner in this run
 };

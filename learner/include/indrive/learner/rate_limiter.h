@@ -18,11 +18,11 @@
 namespace indrive::learner {
 
 struct RateOptions {
-  double replay_ratio = 32.0;          // replayed steps per env step
-  std::int64_t steps_per_update = 1;   // batch x length
-  std::int64_t prefill = 0;            // env steps before the first update
-  std::int64_t slack = 64;             // env steps actors may run ahead of the next update
-  bool async = false;                  // no limit on the actors
+  double replay_ratio = 32.0;         // replayed steps per env step
+  std::int64_t steps_per_update = 1;  // batch x length
+  std::int64_t prefill = 0;           // env steps before the first update
+  std::int64_t slack = 64;            // env steps actors may run ahead of the next update
+  bool async = false;                 // no limit on the actors
 };
 
 class RateLimiter {
