@@ -5,6 +5,7 @@
 #include <fastdds/dds/log/Log.hpp>
 #include <thread>
 
+#include "indrive/common/check.h"
 #include "indrive/common/config.h"
 
 namespace indrive::dds {
@@ -150,8 +151,10 @@ Participant::Participant(const ParticipantOptions& options)
 }
 
 Participant::~Participant() {
-  // Writers and readers are owned by the caller and must already be gone; topics, publisher
-  // and subscriber go with the participant.
+  // Writers and readers are owned by the caller and must already be gone (they hold pointers
+  // into this participant); topics, publisher and subscriber go with the participant.
+  INDRIVE_CHECK_EQ(live_endpoints_->load(), 0)
+      << "destroy writers and readers before their participant";
   participant_->delete_contained_entities();
   DomainParticipantFactory::get_instance()->delete_participant(participant_);
 }

@@ -167,6 +167,16 @@ void seal(msg::StepAllowance& allowance) { allowance.schema_version(kSchemaVersi
 void seal(msg::EpisodeResult& result) { result.schema_version(kSchemaVersion); }
 void seal(msg::Heartbeat& heartbeat) { heartbeat.schema_version(kSchemaVersion); }
 
+msg::SnapshotAnnounce announce_for(const msg::PolicySnapshot& snapshot) {
+  msg::SnapshotAnnounce announce;
+  announce.run_id(snapshot.run_id());
+  announce.version(snapshot.version());
+  announce.checksum(snapshot.checksum());
+  announce.size_bytes(snapshot.params().size());
+  seal(announce);
+  return announce;
+}
+
 DropReason validate(const msg::TrajectoryChunk& chunk, std::string_view expected_run_id) {
   if (auto header = check_header(chunk.schema_version(), chunk.run_id(), expected_run_id);
       header != DropReason::kOk) {

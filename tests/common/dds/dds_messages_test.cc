@@ -88,6 +88,15 @@ TEST(DdsMessages, SnapshotChecksumCoversParamsAndDescriptor) {
   EXPECT_EQ(validate(good, "run-z"), DropReason::kWrongRun);
 }
 
+TEST(DdsMessages, AnnounceDescribesItsSnapshot) {
+  const auto snapshot = make_synthetic_snapshot("run-a", 9, 4096);
+  const auto announce = announce_for(snapshot);
+  EXPECT_EQ(validate(announce, "run-a"), DropReason::kOk);
+  EXPECT_EQ(announce.version(), 9u);
+  EXPECT_EQ(announce.checksum(), snapshot.checksum());
+  EXPECT_EQ(announce.size_bytes(), 4096u);
+}
+
 TEST(DdsMessages, SmallMessagesCheckHeaderAndRanges) {
   msg::EpisodeResult result;
   result.run_id("r");

@@ -85,6 +85,19 @@ TEST(DdsParticipant, SecondProfilesFileInOneProcessIsRefused) {
       << env_message;
 }
 
+TEST(DdsParticipantDeathTest, OutlivingWriterIsABug) {
+  // Fast DDS runs threads: re-execute the test binary instead of forking this process.
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_DEATH(
+      {
+        auto participant = std::make_unique<Participant>(ParticipantOptions{
+            .domain_id = testing::unique_domain_id(), .profiles_file = profiles()});
+        auto writer = participant->make_writer<msg::Heartbeat>();
+        participant.reset();
+      },
+      "destroy writers and readers before their participant");
+}
+
 TEST(DdsParticipant, LateReaderGetsTransientLocalAllowance) {
   const int domain = testing::unique_domain_id();
   Participant learner({.domain_id = domain, .profiles_file = profiles()});

@@ -13,6 +13,7 @@
 // message that says what to fix; Fast DDS's own log lines go to the project's log sink.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -82,9 +83,15 @@ void route_fastdds_log();
 template <typename T>
 class Writer {
  public:
-  Writer(eprosima::fastdds::dds::Publisher* publisher, eprosima::fastdds::dds::DataWriter* writer)
-      : publisher_(publisher), writer_(writer) {}
-  ~Writer() { publisher_->delete_datawriter(writer_); }
+  Writer(eprosima::fastdds::dds::Publisher* publisher, eprosima::fastdds::dds::DataWriter* writer,
+         std::shared_ptr<std::atomic<int>> live_endpoints)
+      : publisher_(publisher), writer_(writer), live_endpoints_(std::move(live_endpoints)) {
+    live_endpoints_->fetch_add(1);
+  }
+  ~Writer() {
+    publisher_->delete_datawriter(writer_);
+    live_endpoints_->fetch_sub(1);
+  }
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
@@ -117,6 +124,7 @@ class Writer {
   }
   eprosima::fastdds::dds::Publisher* publisher_;
   eprosima::fastdds::dds::DataWriter* writer_;
+  std::shared_ptr<std::atomic<int>> live_endpoints_;
 };
 
 // Typed reader for one topic that calls a function for each sample as it arrives (on a Fast
@@ -132,6 +140,7 @@ class Reader : public eprosima::fastdds::dds::DataReaderListener {
     if (reader_ != nullptr) {
       reader_->set_listener(nullptr);
       subscriber_->delete_datareader(reader_);
+      live_endpoints_->fetch_sub(1);
     }
   }
   Reader(const Reader&) = delete;
@@ -174,14 +183,18 @@ class Reader : public eprosima::fastdds::dds::DataReaderListener {
  private:
   friend class Participant;
   void attach(eprosima::fastdds::dds::Subscriber* subscriber,
-              eprosima::fastdds::dds::DataReader* reader) {
+              eprosima::fastdds::dds::DataReader* reader,
+              std::shared_ptr<std::atomic<int>> live_endpoints) {
     subscriber_ = subscriber;
     reader_ = reader;
+    live_endpoints_ = std::move(live_endpoints);
+    live_endpoints_->fetch_add(1);
   }
 
   Callback callback_;
   eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
   eprosima::fastdds::dds::DataReader* reader_ = nullptr;
+  std::shared_ptr<std::atomic<int>> live_endpoints_;
   std::mutex take_mutex_;
   T sample_;  // reused, so its sequences keep their capacity between samples
   std::atomic<std::uint64_t> callback_failures_{0};
@@ -202,7 +215,8 @@ class Participant {
       const std::string& topic = TopicTraits<T>::kTopic,
       const std::string& profile = TopicTraits<T>::kWriterProfile) {
     auto* topic_entity = find_or_create_topic<T>(topic);
-    return std::make_unique<Writer<T>>(publisher_, create_writer(topic_entity, profile));
+    return std::make_unique<Writer<T>>(publisher_, create_writer(topic_entity, profile),
+                                       live_endpoints_);
   }
 
   // Creates a reader on `topic` with the QoS of the XML <data_reader> profile `profile`;
@@ -213,7 +227,8 @@ class Participant {
       const std::string& profile = TopicTraits<T>::kReaderProfile) {
     auto* topic_entity = find_or_create_topic<T>(topic);
     auto reader = std::make_unique<Reader<T>>(std::move(on_sample));
-    reader->attach(subscriber_, create_reader(topic_entity, profile, reader.get()));
+    reader->attach(subscriber_, create_reader(topic_entity, profile, reader.get()),
+                   live_endpoints_);
     return reader;
   }
 
@@ -244,6 +259,8 @@ class Participant {
   eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
   std::mutex topics_mutex_;
   std::map<std::string, eprosima::fastdds::dds::Topic*> topics_;
+  // Writers and readers alive on this participant; it must outlive them.
+  std::shared_ptr<std::atomic<int>> live_endpoints_ = std::make_shared<std::atomic<int>>(0);
 };
 
 namespace detail {

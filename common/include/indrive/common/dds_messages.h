@@ -21,15 +21,15 @@
 #include <string_view>
 #include <vector>
 
-#include "common.h"
-#include "control.h"
-#include "controlPubSubTypes.h"
-#include "evaluation.h"
-#include "evaluationPubSubTypes.h"
-#include "policy.h"
-#include "policyPubSubTypes.h"
-#include "trajectory.h"
-#include "trajectoryPubSubTypes.h"
+#include "indrive/msg/common.h"
+#include "indrive/msg/control.h"
+#include "indrive/msg/controlPubSubTypes.h"
+#include "indrive/msg/evaluation.h"
+#include "indrive/msg/evaluationPubSubTypes.h"
+#include "indrive/msg/policy.h"
+#include "indrive/msg/policyPubSubTypes.h"
+#include "indrive/msg/trajectory.h"
+#include "indrive/msg/trajectoryPubSubTypes.h"
 
 namespace indrive::dds {
 
@@ -85,6 +85,10 @@ void seal(msg::SnapshotRequest& request);
 void seal(msg::StepAllowance& allowance);
 void seal(msg::EpisodeResult& result);
 void seal(msg::Heartbeat& heartbeat);
+
+// The sealed announcement of `snapshot` (run, version, checksum, params size), which the
+// learner repeats so that late joiners notice a snapshot they missed.
+msg::SnapshotAnnounce announce_for(const msg::PolicySnapshot& snapshot);
 
 // Checks schema version, run id, shape and checksum, in that order, and returns the first
 // failure. An empty expected_run_id accepts any run (for tools that watch every run).
