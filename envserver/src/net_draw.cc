@@ -90,23 +90,30 @@ void draw_town(const RoadNetwork& net, const std::vector<Route>& routes,
   }
 
   // Routes: each in its own colour, shifted sideways a little so overlapping routes stay
-  // visible, with arrows every 40 m and a ring at the start.
+  // visible; then, on top of all lines, arrows every 40 m, a ring at each start and a cross at
+  // the end of a point-to-point route.
+  const int thickness = std::max(2, static_cast<int>(std::lround(0.8 * canvas.scale())));
+  std::vector<std::vector<Eigen::Vector2d>> lines;
   for (size_t r = 0; r < routes.size(); ++r) {
-    const Route& route = routes[r];
-    const cv::Scalar colour = kRouteColours[r % std::size(kRouteColours)];
     const double shift = (static_cast<double>(r) - 1.5) * 0.6;
     std::vector<Eigen::Vector2d> line;
-    for (const Waypoint& w : route.waypoints()) {
+    for (const Waypoint& w : routes[r].waypoints()) {
       line.push_back(w.position +
                      shift * Eigen::Vector2d(-std::sin(w.heading_rad), std::cos(w.heading_rad)));
     }
-    const int thickness = std::max(2, static_cast<int>(std::lround(0.8 * canvas.scale())));
-    cv::polylines(image, canvas.px(line), route.is_loop(), colour, thickness, cv::LINE_AA, 3);
+    cv::polylines(image, canvas.px(line), routes[r].is_loop(),
+                  kRouteColours[r % std::size(kRouteColours)], thickness, cv::LINE_AA, 3);
+    lines.push_back(std::move(line));
+  }
+  for (size_t r = 0; r < routes.size(); ++r) {
+    const Route& route = routes[r];
+    const std::vector<Eigen::Vector2d>& line = lines[r];
+    const cv::Scalar colour = kRouteColours[r % std::size(kRouteColours)];
     const int arrow_every =
         std::max(1, static_cast<int>(40.0 / (route.length_m() / route.waypoints().size())));
     for (size_t i = arrow_every / 2; i + 2 < line.size(); i += arrow_every) {
       cv::arrowedLine(image, canvas.px(line[i]), canvas.px(line[i + 2]), colour, thickness,
-                      cv::LINE_AA, 3, 1.2);
+                      cv::LINE_AA, 3, 1.0);
     }
     cv::circle(image, canvas.px(line.front()), static_cast<int>(8 * 2.5 * canvas.scale()), colour,
                thickness, cv::LINE_AA, 3);

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <map>
 #include <set>
+#include <thread>
 
 #include "net_geometry.h"
 #include "net_test_town.h"
@@ -97,7 +98,9 @@ TEST_P(BuiltInTownTest, EveryTurnIsWithinTheEgosSteeringReach) {
   EXPECT_GT(turns, 10);
   // The ring's corners are curves inside edges.
   for (const Lane& lane : net.lanes()) {
-    if (!lane.internal) EXPECT_GE(min_turn_radius(lane.shape), kEgoTurnRadiusM) << lane.id;
+    if (!lane.internal) {
+      EXPECT_GE(min_turn_radius(lane.shape), kEgoTurnRadiusM) << lane.id;
+    }
   }
 }
 
@@ -139,6 +142,27 @@ TEST(TownResolveTest, ConversionIsCachedByContent) {
     EXPECT_THAT(entry.path().string(), ::testing::Not(HasSubstr(".tmp.")));
   }
   EXPECT_EQ(files, 2);
+}
+
+TEST(TownResolveTest, ConcurrentConversionsAgree) {
+  // Actors started together all convert the same town into one cache folder.
+  indrive::testing::TempDir dir;
+  TownOptions options;
+  options.cache_dir = dir.path();
+  std::vector<fs::path> results(4);
+  std::vector<std::thread> threads;
+  for (size_t i = 0; i < results.size(); ++i) {
+    threads.emplace_back([&, i] { results[i] = resolve_town_network("town02", options); });
+  }
+  for (auto& thread : threads) thread.join();
+  for (const auto& result : results) EXPECT_EQ(result, results[0]);
+  EXPECT_EQ(RoadNetwork::load(results[0]).lanes().size(), 100u);
+  int files = 0;
+  for (const auto& entry : fs::directory_iterator(dir.path())) {
+    ++files;
+    EXPECT_EQ(entry.path(), results[0]);
+  }
+  EXPECT_EQ(files, 1);
 }
 
 TEST(TownResolveTest, UserNetworkAndOpenDriveAndGrid) {

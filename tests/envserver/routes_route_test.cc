@@ -111,8 +111,12 @@ TEST_P(BuiltInRouteTest, WaypointsAreDenseSmoothAndOnTheRoute) {
     std::vector<Eigen::Vector2d> polygon;
     for (const Waypoint& w : waypoints) polygon.push_back(w.position);
     const double area = geometry::signed_area(polygon);
-    if (GetParam().route == "right_loop") EXPECT_LT(area, -1000.0);
-    if (GetParam().route == "left_loop") EXPECT_GT(area, 1000.0);
+    if (GetParam().route == "right_loop") {
+      EXPECT_LT(area, -1000.0);
+    }
+    if (GetParam().route == "left_loop") {
+      EXPECT_GT(area, 1000.0);
+    }
   } else {
     // The straight corridor never bends.
     for (const Waypoint& w : waypoints) {

@@ -141,7 +141,8 @@ class RoadNetwork {
   Pose2 lane_pose(int lane, double s_m) const;
   // Projects a point onto lane `lane`'s centre line, however far it is.
   LanePosition project(int lane, const Eigen::Vector2d& point) const;
-  // Returns every lane whose surface contains the point (|lateral| <= width / 2 + margin_m).
+  // Returns every lane whose surface contains the point (|lateral| <= width / 2 + margin_m, with
+  // margin_m in [0, 2]), sorted by lane index.
   std::vector<LanePosition> lanes_at(const Eigen::Vector2d& point, double margin_m = 0.0) const;
   // Returns the lane containing the point that fits best: the smallest |lateral| relative to
   // the lane width, a normal lane winning ties over an internal one; nullopt when off all lanes.
