@@ -34,6 +34,7 @@ Env::Env(const EnvConfig& config) : config_(config), model_(config.ego) {
     throw EnvError("ego dt, event dt and SUMO step length must agree (all 0.1 s by default)");
   }
   if (!config_.task.empty()) weights_ = reward_weights(config_.task);
+  // Traffic cars get the ego's size: one CARLA-like car model for every vehicle.
   config_.sumo.vehicle_length_m = config_.ego.length_m;
   config_.sumo.vehicle_width_m = config_.ego.width_m;
   validate(config_.camera);

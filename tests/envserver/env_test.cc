@@ -31,23 +31,6 @@ std::uint32_t crc_of(const cv::Mat& image) {
   return indrive::crc32(image.data, image.total() * image.elemSize());
 }
 
-// Runs up to `steps` seeded random actions (restarting nothing) and returns the observation
-// checksums, one per step including the reset.
-std::vector<std::uint32_t> run_random(Env& env, const ResetOptions& options, int steps,
-                                      std::uint64_t action_seed) {
-  std::vector<std::uint32_t> crcs;
-  StepResult r = env.reset(options);
-  crcs.push_back(crc_of(r.observation));
-  std::mt19937_64 rng(action_seed);
-  for (int i = 0; i < steps && !r.is_last; ++i) {
-    // Mostly straight with throttle, so the episode lasts and traffic comes into view.
-    const int action = (rng() % 4 == 0) ? static_cast<int>(rng() % kNumActions) : 4;
-    r = env.step(action);
-    crcs.push_back(crc_of(r.observation));
-  }
-  return crcs;
-}
-
 TEST(Env, SameSeedsGiveBitwiseEqualObservationsFor500Steps) {
   Env& env = shared_env();
   // Without a time limit or road rules ending it early: the follower keeps the ego on a loop.
@@ -138,6 +121,43 @@ TEST(Env, RewardOnlyInTaskPhases) {
   r = env.step(encode_action(1, 2));
   EXPECT_FALSE(r.reward.has_value());  // pretraining config: no reward at all
   EXPECT_TRUE(r.is_first == false);
+}
+
+TEST(Env, TaskPhaseRewardsProgressAlongTheRoute) {
+  EnvConfig config;
+  config.town = "town02";
+  config.task = "lane_following";
+  config.sumo.mode = SumoMode::kLibtraci;  // the shared Env holds libsumo
+  config.camera.width = 32;
+  config.camera.height = 32;
+  Env env(config);
+  StepResult r = env.reset({.route = "straight", .density = 0});
+  EXPECT_FALSE(r.reward.has_value());  // no reward for the reset observation
+  WaypointFollower follower(*env.route(), config.ego, {.target_speed_mps = 5.0});
+  follower.reset();
+  double waypoint_sum = 0.0;
+  for (int i = 0; i < 200 && !r.is_last; ++i) {
+    r = env.step(follower.act(env.ego()));
+    ASSERT_TRUE(r.reward.has_value());
+    EXPECT_DOUBLE_EQ(*r.reward, r.reward_terms.total());
+    EXPECT_DOUBLE_EQ(r.reward_terms.time, -0.01);
+    waypoint_sum += r.reward_terms.waypoint;
+  }
+  // Waypoints are ~2 m apart: the reward counts about one per 2 m of progress.
+  EXPECT_NEAR(waypoint_sum, r.route_progress_m / 2.0, 3.0);
+  // At the target speed, straight along the lane, the speed term is near its best (0.05 * 5).
+  EXPECT_GT(r.reward_terms.speed, 0.2);
+}
+
+TEST(Env, ResetCanSwitchTowns) {
+  Env& env = shared_env();
+  env.reset({.town = "town02", .route = "left_loop", .density = 5});
+  EXPECT_EQ(env.town().name, "town02");
+  EXPECT_EQ(env.route()->name(), "left_loop");
+  StepResult r = env.step(encode_action(1, 1));
+  EXPECT_EQ(r.step, 1);
+  env.reset({.town = "town01", .route = "straight", .density = 0});
+  EXPECT_EQ(env.town().name, "town01");
 }
 
 TEST(Env, BadInputIsNamed) {

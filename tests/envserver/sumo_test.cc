@@ -116,6 +116,23 @@ TEST(Libsumo, EgoStaysWhereItIsPlacedAndTrafficBrakesForIt) {
   EXPECT_TRUE(sumo.collisions().empty());
 }
 
+TEST(Libsumo, EgoCanBePlacedFarFromEveryLane) {
+  TempDir dir;
+  auto& sumo = shared_libsumo();
+  sumo.load(make_t_junction_net(dir.path()), 3);
+  sumo.add_ego("ego", "we");
+  std::vector<VehicleState> states;
+  // 15 m and then 60 m south of the road: beyond the cheap 10 m lane search.
+  for (const double y : {-15.0, -60.0}) {
+    EXPECT_NO_THROW(sumo.place_ego("ego", Pose2{60.0, y, 0.0}, 3.0));
+    sumo.step();
+    sumo.vehicles(states);
+    ASSERT_EQ(states.size(), 1u);
+    EXPECT_NEAR(states[0].pose.x_m, 60.0, 1e-6);
+    EXPECT_NEAR(states[0].pose.y_m, y, 1e-6);
+  }
+}
+
 TEST(Libsumo, EgoPlacedOntoACarIsReportedAsACollision) {
   TempDir dir;
   auto& sumo = shared_libsumo();
