@@ -67,6 +67,11 @@ Tensor LayerNorm::operator()(Tensor x) const {
   return layer_norm(x, scale_->tensor(), offset_->tensor(), eps_);
 }
 
+Tensor LayerNorm::operator()(Tensor x, Act act) const {
+  if (act == Act::kSilu) return layer_norm_silu(x, scale_->tensor(), offset_->tensor(), eps_);
+  return activate((*this)(x), act);
+}
+
 // ---- MLP ----
 
 Mlp::Mlp(ParamGroup& group, const std::string& name, int in, MlpOptions options, Rng& rng)
@@ -88,8 +93,7 @@ Mlp::Mlp(ParamGroup& group, const std::string& name, int in, MlpOptions options,
 Tensor Mlp::operator()(Tensor x) const {
   for (std::size_t i = 0; i < hidden_.size(); ++i) {
     x = hidden_[i](x);
-    if (options_.norm) x = norms_[i](x);
-    x = activate(x, options_.act);
+    x = options_.norm ? norms_[i](x, options_.act) : activate(x, options_.act);
   }
   if (options_.out > 0) x = out_(x);
   return x;
@@ -153,7 +157,7 @@ ConvEncoder::ConvEncoder(ParamGroup& group, const std::string& name, ConvStackOp
 Tensor ConvEncoder::operator()(Tensor images) const {
   Tensor x = images;
   for (std::size_t i = 0; i < weights_.size(); ++i)
-    x = activate(norms_[i](conv2d(x, weights_[i]->tensor())), options_.act);
+    x = norms_[i](conv2d(x, weights_[i]->tensor()), options_.act);
   return reshape(x, Shape{x.dim(0), x.numel() / x.dim(0)});
 }
 
@@ -189,7 +193,7 @@ Tensor ConvDecoder::operator()(Tensor features) const {
     if (i + 1 == weights_.size()) {
       x = conv_transpose2d(x, weights_[i]->tensor(), out_bias_->tensor());
     } else {
-      x = activate(norms_[i](conv_transpose2d(x, weights_[i]->tensor())), options_.act);
+      x = norms_[i](conv_transpose2d(x, weights_[i]->tensor()), options_.act);
     }
   }
   return x;

@@ -28,9 +28,16 @@ struct Grid {
 };
 
 // cols (images * Hs * Ws, K*K*C) <- patches of big (images, Hb, Wb, C) for `images` images.
+// Images are independent, so both loops split over them when the work is large.
+bool parallel_images(const Grid& g, std::int64_t images) {
+  return images > 1 && images * g.rows_per_image() * g.patch() >= detail::kParallelMin &&
+         omp_get_max_threads() > 1 && !omp_in_parallel();
+}
+
 void im2col(const Grid& g, const float* big, std::int64_t images, float* cols) {
   const std::int64_t patch = g.patch();
   const std::int64_t c = g.c;
+#pragma omp parallel for schedule(static) if (parallel_images(g, images))
   for (std::int64_t i = 0; i < images; ++i) {
     const float* img = big + i * g.hb * g.wb * c;
     for (std::int64_t sy = 0; sy < g.hs; ++sy)
@@ -59,6 +66,7 @@ void im2col(const Grid& g, const float* big, std::int64_t images, float* cols) {
 void col2im(const Grid& g, const float* cols, std::int64_t images, float* big) {
   const std::int64_t patch = g.patch();
   const std::int64_t c = g.c;
+#pragma omp parallel for schedule(static) if (parallel_images(g, images))
   for (std::int64_t i = 0; i < images; ++i) {
     float* img = big + i * g.hb * g.wb * c;
     for (std::int64_t sy = 0; sy < g.hs; ++sy)
@@ -162,7 +170,8 @@ void conv_transpose2d_backward(Node& n) {
   const std::int64_t ic = n.iparam[7];
   Node* x = n.in[0];
   Node* w = n.in[1];
-  float* gx = grad_of(x);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(x, &fresh);
   float* gw = grad_of(w);
   if (float* gb = grad_of(n.in[2])) bias_grad(n.grad, gb, n.shape.rows(), g.c);
   const std::int64_t patch = g.patch();
@@ -177,7 +186,7 @@ void conv_transpose2d_backward(Node& n) {
     if (gw) detail::gemm(mat(gw, ic, patch), xin.transpose(), gcols, true);
     if (gx)
       detail::gemm(mat(gx + i0 * g.rows_per_image() * ic, rows, ic), gcols,
-                   cmat(w->value, ic, patch).transpose(), true);
+                   cmat(w->value, ic, patch).transpose(), !fresh);
   }
 }
 

@@ -150,12 +150,16 @@ void bce_backward(Node& n) {
 }
 
 void squared_error_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
   if (gx == nullptr) return;
   const float* x = n.in[0]->value;
   const float* t = n.in[1]->value;
   detail::parallel_for(n.shape.numel(), [&](std::int64_t s, std::int64_t e) {
-    for (std::int64_t i = s; i < e; ++i) gx[i] += 2.0f * n.grad[i] * (x[i] - t[i]);
+    if (fresh)
+      for (std::int64_t i = s; i < e; ++i) gx[i] = 2.0f * n.grad[i] * (x[i] - t[i]);
+    else
+      for (std::int64_t i = s; i < e; ++i) gx[i] += 2.0f * n.grad[i] * (x[i] - t[i]);
   });
 }
 

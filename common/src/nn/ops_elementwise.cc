@@ -194,120 +194,150 @@ Tensor div(Tensor a, Tensor b) { return binary(kDiv, a, b); }
 
 // ---- Unary ops ----
 //
-// Each op is a struct with Forward(x, y, p) and Backward(x, y, gy, gx, p) over array maps; gx is
-// accumulated. p points at the node's float parameters.
+// Each op is a struct with Forward(x, y, p) and Backward(x, y, gy, gx, p, assign) over array
+// maps; Backward accumulates into gx, or assigns when gx is a fresh buffer. p points at the node's
+// float parameters.
 
 namespace {
 
+// gx = e when the gradient buffer is fresh (uninitialised), gx += e otherwise.
+template <typename E>
+void Put(Array& gx, const E& e, bool assign) {
+  if (assign)
+    gx = e;
+  else
+    gx += e;
+}
+
 struct ScaleOp {
   static void Forward(ConstArray x, Array y, const float* p) { y = x * p[0]; }
-  static void Backward(ConstArray, ConstArray, ConstArray gy, Array gx, const float* p) {
-    gx += gy * p[0];
+  static void Backward(ConstArray, ConstArray, ConstArray gy, Array gx, const float* p,
+                       bool assign) {
+    Put(gx, gy * p[0], assign);
   }
 };
 struct AddScalarOp {
   static void Forward(ConstArray x, Array y, const float* p) { y = x + p[0]; }
-  static void Backward(ConstArray, ConstArray, ConstArray gy, Array gx, const float*) { gx += gy; }
+  static void Backward(ConstArray, ConstArray, ConstArray gy, Array gx, const float*, bool assign) {
+    Put(gx, gy, assign);
+  }
 };
 struct RsubScalarOp {
   static void Forward(ConstArray x, Array y, const float* p) { y = p[0] - x; }
-  static void Backward(ConstArray, ConstArray, ConstArray gy, Array gx, const float*) { gx -= gy; }
+  static void Backward(ConstArray, ConstArray, ConstArray gy, Array gx, const float*, bool assign) {
+    Put(gx, -gy, assign);
+  }
 };
 struct SigmoidOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.logistic(); }
-  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*) {
-    gx += gy * y * (1.0f - y);
+  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, gy * y * (1.0f - y), assign);
   }
 };
 struct SiluOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x * x.logistic(); }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*) {
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*,
+                       bool assign) {
     // d/dx x s(x) = s(x) (1 + x (1 - s(x))).
-    gx += gy * (x.logistic() * (1.0f + x * (1.0f - x.logistic())));
+    Put(gx, gy * (x.logistic() * (1.0f + x * (1.0f - x.logistic()))), assign);
   }
 };
 struct EluOp {
   static void Forward(ConstArray x, Array y, const float*) {
     y = (x > 0.0f).select(x, x.exp() - 1.0f);
   }
-  static void Backward(ConstArray x, ConstArray y, ConstArray gy, Array gx, const float*) {
-    gx += (x > 0.0f).select(gy, gy * (y + 1.0f));
+  static void Backward(ConstArray x, ConstArray y, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, (x > 0.0f).select(gy, gy * (y + 1.0f)), assign);
   }
 };
 struct ReluOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.max(0.0f); }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*) {
-    gx += (x > 0.0f).select(gy, 0.0f);
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, (x > 0.0f).select(gy, 0.0f), assign);
   }
 };
 struct TanhOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.tanh(); }
-  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*) {
-    gx += gy * (1.0f - y.square());
+  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, gy * (1.0f - y.square()), assign);
   }
 };
 struct ExpOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.exp(); }
-  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*) {
-    gx += gy * y;
+  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, gy * y, assign);
   }
 };
 struct LogOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.log(); }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*) {
-    gx += gy / x;
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, gy / x, assign);
   }
 };
 struct SquareOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.square(); }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*) {
-    gx += 2.0f * gy * x;
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, 2.0f * gy * x, assign);
   }
 };
 struct SqrtOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.sqrt(); }
-  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*) {
-    gx += 0.5f * gy / y;
+  static void Backward(ConstArray, ConstArray y, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, 0.5f * gy / y, assign);
   }
 };
 struct SoftplusOp {
   static void Forward(ConstArray x, Array y, const float*) {
     y = x.max(0.0f) + (-x.abs()).exp().log1p();
   }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*) {
-    gx += gy * x.logistic();
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, gy * x.logistic(), assign);
   }
 };
 struct SymlogOp {
   static void Forward(ConstArray x, Array y, const float*) { y = x.sign() * x.abs().log1p(); }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*) {
-    gx += gy / (1.0f + x.abs());
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, gy / (1.0f + x.abs()), assign);
   }
 };
 struct SymexpOp {
   static void Forward(ConstArray x, Array y, const float*) {
     y = x.sign() * (x.abs().exp() - 1.0f);
   }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*) {
-    gx += gy * x.abs().exp();
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float*,
+                       bool assign) {
+    Put(gx, gy * x.abs().exp(), assign);
   }
 };
 struct ClampOp {
   static void Forward(ConstArray x, Array y, const float* p) { y = x.max(p[0]).min(p[1]); }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float* p) {
-    gx += (x >= p[0] && x <= p[1]).select(gy, 0.0f);
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float* p,
+                       bool assign) {
+    Put(gx, (x >= p[0] && x <= p[1]).select(gy, 0.0f), assign);
   }
 };
 struct MaximumOp {
   static void Forward(ConstArray x, Array y, const float* p) { y = x.max(p[0]); }
-  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float* p) {
-    gx += (x >= p[0]).select(gy, 0.0f);
+  static void Backward(ConstArray x, ConstArray, ConstArray gy, Array gx, const float* p,
+                       bool assign) {
+    Put(gx, (x >= p[0]).select(gy, 0.0f), assign);
   }
 };
 
 template <typename Op>
 void unary_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
   if (gx == nullptr) return;
   const float* x = n.in[0]->value;
   const float* y = n.value;
@@ -316,7 +346,7 @@ void unary_backward(Node& n) {
   parallel_for(n.shape.numel(), [&](std::int64_t s, std::int64_t e) {
     const std::int64_t len = e - s;
     Op::Backward(ConstArray(x + s, len), ConstArray(y + s, len), ConstArray(gy + s, len),
-                 Array(gx + s, len), p);
+                 Array(gx + s, len), p, fresh);
   });
 }
 

@@ -18,8 +18,9 @@ void linear_backward(Node& n) {
   Node* b = n.in[2];
   const std::int64_t m = n.iparam[0], k = n.iparam[1], cols = n.iparam[2];
   auto gy = cmat(n.grad, m, cols);
-  if (float* gx = grad_of(x))
-    detail::gemm(mat(gx, m, k), gy, cmat(w->value, k, cols).transpose(), true);
+  bool fresh = false;
+  if (float* gx = detail::grad_for_write(x, &fresh))
+    detail::gemm(mat(gx, m, k), gy, cmat(w->value, k, cols).transpose(), !fresh);
   if (float* gw = grad_of(w))
     detail::gemm(mat(gw, k, cols), cmat(x->value, m, k).transpose(), gy, true);
   if (float* gb = grad_of(b)) mat(gb, 1, cols) += gy.colwise().sum();

@@ -10,26 +10,12 @@ namespace indrive::nn {
 using detail::grad_of;
 using detail::Node;
 
-namespace {
-
-// Adds the gradient of a view back into its source.
-void copy_grad_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
-  if (gx == nullptr) return;
-  const float* gy = n.grad;
-  detail::parallel_for(n.shape.numel(), [&](std::int64_t s, std::int64_t e) {
-    for (std::int64_t i = s; i < e; ++i) gx[i] += gy[i];
-  });
-}
-
-}  // namespace
-
 Tensor reshape(Tensor x, const Shape& shape) {
   INDRIVE_CHECK_EQ(x.numel(), shape.numel())
       << "reshape " << x.shape().str() << " to " << shape.str();
   Graph& g = current_graph();
   Node* n = g.new_view_node(shape, x.data());
-  g.record(n, copy_grad_backward, {x.node()});
+  g.link_view(n, x.node(), 0);
   return Tensor(n);
 }
 
@@ -151,11 +137,14 @@ Tensor slice(Tensor x, std::int64_t begin, std::int64_t end, int axis_in) {
   const std::int64_t inner = detail::inner_size(out, axis);
   const std::int64_t src_width = x.shape().dims[axis] * inner;
   const std::int64_t width = out.dims[axis] * inner;
-  Node* n;
   if (outer == 1) {
-    n = g.new_view_node(out, x.data() + begin * inner);  // contiguous: no copy
-  } else {
-    n = g.new_node(out);
+    // Contiguous: a view with no copy, sharing the source's gradient.
+    Node* n = g.new_view_node(out, x.data() + begin * inner);
+    g.link_view(n, x.node(), begin * inner);
+    return Tensor(n);
+  }
+  Node* n = g.new_node(out);
+  {
     for (std::int64_t o = 0; o < outer; ++o)
       std::memcpy(n->value + o * width, x.data() + o * src_width + begin * inner,
                   width * sizeof(float));
@@ -172,10 +161,22 @@ namespace {
 
 // iparam: outer, size, inner; fparam[0]: factor (1 for sum, 1/size for mean).
 void reduce_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
   if (gx == nullptr) return;
   const std::int64_t outer = n.iparam[0], size = n.iparam[1], inner = n.iparam[2];
   const float f = n.fparam[0];
+  if (inner == 1) {
+    // Rows broadcast their one gradient value (the common case: sums over the last axis).
+    detail::parallel_for(outer * size, [&](std::int64_t s, std::int64_t e) {
+      for (std::int64_t i = s; i < e; ++i) {
+        const float v = f * n.grad[i / size];
+        gx[i] = fresh ? v : gx[i] + v;
+      }
+    });
+    return;
+  }
+  if (fresh) std::fill_n(gx, outer * size * inner, 0.0f);
   for (std::int64_t o = 0; o < outer; ++o)
     for (std::int64_t k = 0; k < size; ++k) {
       float* dst = gx + (o * size + k) * inner;

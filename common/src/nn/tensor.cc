@@ -138,6 +138,37 @@ detail::Node* Graph::new_node(const Shape& shape) {
   return new_view_node(shape, alloc(shape.numel()));
 }
 
+void Graph::link_view(detail::Node* view, detail::Node* source, std::int64_t offset) {
+  if (!grad_enabled_ || !source->requires_grad) return;
+  view->requires_grad = true;
+  view->view_of = source;
+  view->view_offset = offset;
+}
+
+float* Graph::grad_buffer(detail::Node* node) {
+  if (node == nullptr || !node->requires_grad) return nullptr;
+  if (node->grad == nullptr) {
+    if (node->view_of != nullptr)
+      node->grad = grad_buffer(node->view_of) + node->view_offset;
+    else
+      node->grad = alloc_zeroed(node->shape.numel());
+  }
+  return node->grad;
+}
+
+float* Graph::grad_buffer_for_write(detail::Node* node, bool* fresh) {
+  *fresh = false;
+  if (node == nullptr || !node->requires_grad) return nullptr;
+  if (node->grad == nullptr && node->view_of == nullptr) {
+    // Nothing has been added to this gradient yet (views allocate their source's buffer
+    // when first used), so the first writer may overwrite instead of accumulate.
+    node->grad = alloc(node->shape.numel());
+    *fresh = true;
+    return node->grad;
+  }
+  return grad_buffer(node);
+}
+
 void Graph::record(detail::Node* node, detail::BackwardFn fn,
                    std::initializer_list<detail::Node*> in) {
   INDRIVE_CHECK_LE(static_cast<int>(in.size()), 3) << "ops have at most 3 inputs";
@@ -159,8 +190,7 @@ void Graph::backward(Tensor loss) {
       << "backward() needs a scalar loss, got shape " << loss.shape().str();
   detail::Node* root = loss.node();
   if (!root->requires_grad) return;  // nothing depends on a parameter
-  if (root->grad == nullptr) root->grad = alloc_zeroed(1);
-  root->grad[0] += 1.0f;
+  grad_buffer(root)[0] += 1.0f;
   // Nodes were recorded in creation order, which is a topological order of the graph.
   for (auto it = tape_.rbegin(); it != tape_.rend(); ++it) {
     detail::Node* node = *it;

@@ -209,6 +209,12 @@ TEST_F(OpsTest, LayerNormGradientsAndValues) {
       check("layer_norm", [&] { return layer_norm(x.tensor(), g.tensor(), b.tensor(), 1e-3f); }),
       0);
   EXPECT_EQ(check("layer_norm plain", [&] { return layer_norm(x.tensor(), {}, {}, 1e-3f); }), 0);
+  EXPECT_EQ(check("layer_norm_silu",
+                  [&] { return layer_norm_silu(x.tensor(), g.tensor(), b.tensor(), 1e-3f); }),
+            0);
+  Tensor fused = layer_norm_silu(x.tensor(), g.tensor(), b.tensor(), 1e-3f);
+  Tensor plain = silu(layer_norm(x.tensor(), g.tensor(), b.tensor(), 1e-3f));
+  for (int i = 0; i < 32; ++i) EXPECT_NEAR(fused.data()[i], plain.data()[i], 1e-6f);
   Tensor y = layer_norm(x.tensor(), {}, {}, 1e-3f);
   for (int r = 0; r < 4; ++r) {
     double m = 0, v = 0, xm = 0, xv = 0;
@@ -219,6 +225,31 @@ TEST_F(OpsTest, LayerNormGradientsAndValues) {
     EXPECT_NEAR(m, 0.0, 1e-5);
     EXPECT_NEAR(v, xv / (xv + 1e-3), 1e-4);  // eps 1e-3 shrinks the variance slightly
   }
+}
+
+TEST_F(OpsTest, LayerNormLargeInputsSplitIntoChunksMatchRowByRow) {
+  // Enough rows for the chunked (and possibly parallel) path; compare against small calls.
+  Parameter& x = input("x", {3000, 24}, -2.0f, 2.0f);
+  Parameter& g = input("g", {24}, 0.5f, 1.5f);
+  Parameter& b = input("b", {24});
+  Tensor big = layer_norm_silu(x.tensor(), g.tensor(), b.tensor());
+  for (int r : {0, 511, 512, 2999}) {
+    Tensor row = layer_norm_silu(slice(x.tensor(), r, r + 1, 0), g.tensor(), b.tensor());
+    for (int c = 0; c < 24; ++c) EXPECT_FLOAT_EQ(big.data()[r * 24 + c], row.data()[c]);
+  }
+  // Scale gradient summed over chunks equals the sum of per-row contributions.
+  current_graph().backward(sum(big));
+  const float total = g.grad()[5];
+  in_.zero_grad();
+  double expect = 0;
+  for (int r = 0; r < 3000; r += 1) {
+    current_graph().reset();
+    Tensor row = layer_norm_silu(slice(x.tensor(), r, r + 1, 0), g.tensor(), b.tensor());
+    current_graph().backward(sum(row));
+    expect += g.grad()[5];
+    in_.zero_grad();
+  }
+  EXPECT_NEAR(total, expect, 1e-3 * std::fabs(expect) + 1e-3);
 }
 
 TEST_F(OpsTest, SoftmaxGradientsAndValues) {

@@ -4,11 +4,17 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 
 #include "indrive/common/nn/nn.h"
 
 namespace indrive::nn {
 namespace {
+
+// The unit tests run the engine on one thread: results are then bitwise reproducible, and on
+// a machine shared with other jobs, parallel regions would only add waiting. The threading
+// test below switches to two threads explicitly.
+const bool kSingleThreaded = (set_threads(1), true);
 
 TEST(ShapeTest, DimensionsRowsAndCols) {
   Shape s{16, 64, 3};
@@ -97,6 +103,38 @@ TEST(GraphTest, SteadyStateStepsDoNotAllocate) {
   EXPECT_GT(g.num_nodes(), 10u);
   g.reset();
   EXPECT_EQ(g.arena_used_bytes(), 0u);
+}
+
+// Forward and backward of a small conv + norm + linear model; returns the loss and all grads.
+std::vector<float> conv_model_grads(int threads) {
+  set_threads(threads);
+  Rng rng(21);
+  ParamGroup group("m");
+  ConvEncoder enc(group, "enc", {.image = 32, .channels = 3, .depth = 8, .min_res = 4}, rng);
+  Linear head(group, "head", enc.embed_dim(), 3, {}, rng);
+  std::vector<float> images(32 * 32 * 32 * 3);
+  for (float& v : images) v = rng.uniform();
+  Graph& g = current_graph();
+  g.reset();
+  Tensor loss = mean(square(head(enc(constant({32, 32, 32, 3}, images)))));
+  g.backward(loss);
+  std::vector<float> out = {loss.item()};
+  for (const auto& p : group.params()) out.insert(out.end(), p->grad().begin(), p->grad().end());
+  g.reset();
+  set_threads(1);
+  return out;
+}
+
+TEST(ThreadsTest, TwoThreadsAgreeWithOne) {
+  // Large enough that im2col, the GEMMs and the norms take their parallel paths.
+  const std::vector<float> one = conv_model_grads(1);
+  const std::vector<float> two = conv_model_grads(2);
+  ASSERT_EQ(one.size(), two.size());
+  for (std::size_t i = 0; i < one.size(); ++i)
+    ASSERT_NEAR(one[i], two[i], 1e-4f * std::fabs(one[i]) + 1e-6f) << "value " << i;
+  // One thread is bitwise reproducible.
+  const std::vector<float> again = conv_model_grads(1);
+  EXPECT_EQ(std::memcmp(one.data(), again.data(), one.size() * sizeof(float)), 0);
 }
 
 TEST(RngTest, DeterministicAndRoughlyNormal) {

@@ -61,6 +61,8 @@ class LayerNorm {
   LayerNorm(ParamGroup& group, const std::string& name, int dim, float eps = 1e-3f);
   // x is (..., dim); result has the same shape.
   Tensor operator()(Tensor x) const;
+  // activate(norm(x), act), fused into one op for SiLU.
+  Tensor operator()(Tensor x, Act act) const;
 
  private:
   Parameter* scale_ = nullptr;

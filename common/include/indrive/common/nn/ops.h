@@ -112,6 +112,9 @@ Tensor mean(Tensor x, int axis);
 // beta are (C) or undefined. DreamerV3 uses eps = 1e-3. For NHWC feature maps this is the
 // channel LayerNorm.
 Tensor layer_norm(Tensor x, Tensor gamma, Tensor beta, float eps = 1e-3f);
+// silu(layer_norm(x, gamma, beta, eps)) as one op: the norm's output is recomputed in the
+// backward pass instead of stored (saves memory traffic on large conv feature maps).
+Tensor layer_norm_silu(Tensor x, Tensor gamma, Tensor beta, float eps = 1e-3f);
 // Softmax over the last axis. For 32 groups of 32 classes, reshape (B, 1024) to (B, 32, 32).
 Tensor softmax(Tensor x);
 // Log-softmax over the last axis.

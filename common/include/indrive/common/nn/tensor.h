@@ -82,6 +82,10 @@ struct Node {
   BackwardFn backward = nullptr;
   Node* in[3] = {nullptr, nullptr, nullptr};
   float* saved = nullptr;  // op-specific buffer kept for backward (e.g. LayerNorm 1/std)
+  // A view (reshape, contiguous slice) shares its source's gradient buffer at an offset, so
+  // it needs no backward rule and no copy.
+  Node* view_of = nullptr;
+  std::int64_t view_offset = 0;
   float fparam[4] = {0, 0, 0, 0};
   std::int64_t iparam[8] = {0, 0, 0, 0, 0, 0, 0, 0};
 };
@@ -159,6 +163,15 @@ class Graph {
   detail::Node* new_node(const Shape& shape);
   // Creates a node whose value aliases `value` (views such as reshape and stop_gradient).
   detail::Node* new_view_node(const Shape& shape, float* value);
+  // Makes `view` (from new_view_node) share the gradient of `source` at `offset` floats, when
+  // grad mode is on and the source requires a gradient.
+  void link_view(detail::Node* view, detail::Node* source, std::int64_t offset);
+  // The gradient buffer of `node`, allocated zeroed on first use (views resolve to their
+  // source's buffer); nullptr when the node takes no gradient.
+  float* grad_buffer(detail::Node* node);
+  // Like grad_buffer, but a buffer allocated by this call is left uninitialised and *fresh is
+  // set: the caller must then write every element (saves zeroing large buffers).
+  float* grad_buffer_for_write(detail::Node* node, bool* fresh);
   // Makes `node` the result of an op with inputs `in` and backward rule `fn`: it records the
   // node when grad mode is on and some input requires a gradient.
   void record(detail::Node* node, detail::BackwardFn fn, std::initializer_list<detail::Node*> in);
