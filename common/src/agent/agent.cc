@@ -80,13 +80,6 @@ std::vector<std::int64_t> architecture(const AgentConfig& c) {
           c.behavior.units,
           c.behavior.layers};
 }
-
-float mean(const std::vector<float>& v) {
-  double s = 0;
-  for (float x : v) s += x;
-  return v.empty() ? 0.0f : static_cast<float>(s / v.size());
-}
-
 }  // namespace
 
 Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {

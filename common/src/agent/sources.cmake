@@ -4,6 +4,7 @@ target_sources(indrive_common PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/behavior.cc
   ${CMAKE_CURRENT_LIST_DIR}/config.cc
   ${CMAKE_CURRENT_LIST_DIR}/intrinsic.cc
+  ${CMAKE_CURRENT_LIST_DIR}/local_trainer.cc
   ${CMAKE_CURRENT_LIST_DIR}/observation.cc
   ${CMAKE_CURRENT_LIST_DIR}/policy.cc
   ${CMAKE_CURRENT_LIST_DIR}/replay.cc

@@ -212,6 +212,23 @@ TEST(Policy, ActsFromSnapshotBytesOnly) {
   EXPECT_THROW(mismatched.load_snapshot(agent.snapshot()), nn::SerializationError);
 }
 
+TEST(Policy, ActsWithTheActorOfItsPhase) {
+  nn::set_threads(1);
+  Agent agent(tiny_config(Phase::kFinetune));
+  EXPECT_EQ(agent.acting_actor_group(), "task_actor");
+  Policy task_policy(tiny_config(Phase::kFinetune));
+  task_policy.load_snapshot(agent.snapshot());
+  // A pretraining policy expects the exploration actor and refuses a task snapshot.
+  Policy expl_policy(tiny_config(Phase::kPretrain));
+  EXPECT_THROW(expl_policy.load_snapshot(agent.snapshot()), nn::SerializationError);
+  // Evaluation acting without sampling takes the most likely action.
+  synthetic::DotEnv env(32, 2);
+  PolicyState state;
+  const int action = task_policy.act_eval(env.reset(), true, state);
+  const std::vector<float>& probs = task_policy.last_probs();
+  for (float p : probs) EXPECT_LE(p, probs[action]);
+}
+
 TEST(Policy, RandomPolicyCoversAllActions) {
   RandomPolicy random(3);
   std::vector<int> counts(kNumActions, 0);
