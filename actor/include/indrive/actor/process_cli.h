@@ -1,0 +1,20 @@
+// The command line both service executables share (fixed by `indrive launch`):
+//   --config FILE --run-dir DIR --domain N [--dds-profile XML] [--set key=value]...
+// plus a stop flag that SIGINT and SIGTERM set.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <string>
+
+#include "indrive/actor/service_config.h"
+
+namespace indrive::actor {
+
+// Adds the shared options to `app`, writing into `options` and `log_level`.
+void add_service_options(CLI::App& app, ServiceOptions& options, std::string& log_level);
+
+// Installs SIGINT/SIGTERM handlers that set the returned flag (once per process).
+const std::atomic<bool>& install_stop_signals();
+
+}  // namespace indrive::actor

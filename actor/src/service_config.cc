@@ -1,0 +1,202 @@
+#include "indrive/actor/service_config.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "indrive/common/dds.h"
+
+namespace indrive::actor {
+namespace {
+
+constexpr const char* kAgentPrefix = "agent.";
+constexpr const char* kDefaultPreset = "cpu";
+
+// Agent keys whose text is not a number, with the values they may take.
+bool is_text_agent_key(const std::string& key) {
+  static const std::set<std::string> text_keys = {
+      "preset", "phase", "task", "eval_sample", "intrinsic.method", "intrinsic.disag_reward"};
+  return text_keys.contains(key);
+}
+
+// Text of a double that the agent's integer and float parsers both read back.
+std::string number_text(double value) {
+  if (std::floor(value) == value && std::fabs(value) < 9.0e15) {
+    return std::to_string(static_cast<long long>(value));
+  }
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), "%.9g", value);
+  return buffer;
+}
+
+}  // namespace
+
+void declare_service_schema(config::Schema& schema) {
+  // The agent's keys, mirrored under agent.* with the default preset's values; the agent's own
+  // parser checks each value when the config is turned into an AgentConfig.
+  const agent::AgentConfig defaults = agent::preset(kDefaultPreset);
+  for (const auto& [key, text] : agent::config_values(defaults)) {
+    if (key == "preset") continue;  // the config's top-level preset names it
+    const std::string name = kAgentPrefix + key;
+    if (key == "phase") {
+      schema.add_choice(name, text, {"pretrain", "finetune", "dreamer"}, "training phase");
+    } else if (key == "task") {
+      schema.add_choice(name, text, {"lane_following", "collision_avoidance"},
+                        "task of the finetune and dreamer phases");
+    } else if (key == "intrinsic.method") {
+      schema.add_choice(name, text, {"disag", "icm", "rnd"}, "intrinsic reward of pretraining");
+    } else if (key == "intrinsic.disag_reward") {
+      schema.add_choice(name, text, {"variance", "std"}, "how disagreement becomes a reward");
+    } else if (key == "eval_sample") {
+      schema.add_bool(name, text == "true", "evaluation samples actions instead of the mode");
+    } else {
+      double value = 0.0;
+      std::from_chars(text.data(), text.data() + text.size(), value);
+      schema.add_float(name, value, "agent " + key + " (see common/agent/config.h)");
+    }
+  }
+  for (const char* name : {"tiny", "cpu", "small"}) {
+    std::vector<std::pair<std::string, std::string>> overrides;
+    for (const auto& [key, text] : agent::config_values(agent::preset(name))) {
+      if (key == "preset" || is_text_agent_key(key)) continue;
+      overrides.emplace_back(kAgentPrefix + key, text);
+    }
+    schema.add_preset(name, std::move(overrides),
+                      std::string("agent sizes of the ") + name + " preset (ARCHITECTURE.md 6)");
+  }
+
+  schema.add_int("run.seed", 0, "seed of spawns, traffic and random actions", 0)
+      .add_int("run.budget_env_steps", 0,
+               "the learner stops after this many env steps (0: no limit)", 0);
+  schema.add_string("env.town", "town01", "training town (built-in name or map path)")
+      .add_choice("env.sumo_mode", "libsumo", {"libsumo", "libtraci"},
+                  "SUMO in-process (libsumo) or as a subprocess (libtraci)")
+      .add_number_list("env.densities", {5, 10, 20}, "traffic densities to draw from", 0, 20)
+      .add_int("env.density_period_steps", 10000, "env steps between density draws", 1)
+      .add_int("env.time_limit_steps", 1000, "episode length limit in steps", 1)
+      .add_string("env.route", "",
+                  "route of the task phases; empty: random spawns without a route");
+  schema.add_int("actor.chunk_length", 64, "steps per TrajectoryChunk (L)", 1, 4096)
+      .add_float("actor.heartbeat_s", 1.0, "seconds between heartbeats", 0.05)
+      .add_float("actor.request_after_s", 2.0,
+                 "seconds an announced snapshot may be missing before it is re-requested", 0.1);
+  schema
+      .add_float("learner.replay_ratio", 32.0, "replayed steps per env step the learner keeps",
+                 0.001)
+      .add_bool("learner.async", false, "lift the rate limit (throughput runs)")
+      .add_int("learner.allowance_slack", 64, "env steps actors may run ahead of training", 1)
+      .add_int("learner.snapshot_every", 10, "updates between PolicySnapshots", 1)
+      .add_float("learner.announce_s", 1.0, "seconds between SnapshotAnnounce messages", 0.05)
+      .add_float("learner.log_interval_s", 5.0, "seconds between metrics lines", 0.1)
+      .add_float("learner.checkpoint_minutes", 5.0, "minutes between checkpoints", 0.01)
+      .add_int("learner.checkpoint_keep", 3, "checkpoints kept", 1)
+      .add_string("learner.init_checkpoint", "",
+                  "checkpoint of a pretraining run to start finetuning from");
+  schema.add_string("eval.towns", "town01,town02", "towns of the evaluation grid, comma-separated")
+      .add_string("eval.routes", "straight,right_loop,left_loop,two_turn",
+                  "routes of the evaluation grid, comma-separated")
+      .add_number_list("eval.densities", {5, 10, 20}, "densities of the evaluation grid", 0, 20)
+      .add_int("eval.episodes_per_cell", 50, "episodes per town x route x density", 1)
+      .add_bool("eval.wait_for_done", true,
+                "evaluate the learner's last snapshot (wait until it reports done)")
+      .add_float("eval.snapshot_timeout_s", 3600.0, "give up when no snapshot comes in time", 1.0)
+      .add_choice("eval.kind", "zero_shot", {"zero_shot", "few_shot"},
+                  "evaluation kind written to the results");
+  dds::declare_config(schema);
+}
+
+const config::Schema& service_schema() {
+  static const config::Schema schema = [] {
+    config::Schema built;
+    declare_service_schema(built);
+    return built;
+  }();
+  return schema;
+}
+
+ServiceConfig ServiceConfig::resolve(const ServiceOptions& options) {
+  if (options.run_dir.empty()) {
+    throw config::ConfigError("no run directory: pass --run-dir runs/<run_id>");
+  }
+  ServiceConfig service(config::Config::resolve(
+      service_schema(), {.file = options.config_file, .overrides = options.overrides}));
+  service.run_dir_ = options.run_dir;
+  service.run_id_ = options.run_dir.lexically_normal().filename().string();
+  if (service.run_id_.empty()) service.run_id_ = options.run_dir.parent_path().filename().string();
+  if (options.domain_id >= 0) {
+    service.config_.set("dds.domain_id", std::to_string(options.domain_id), "--domain");
+  }
+  service.domain_id_ = service.config_.get<int>("dds.domain_id");
+  if (!options.dds_profile.empty()) {
+    service.config_.set("dds.profiles_file", options.dds_profile, "--dds-profile");
+  }
+  service.dds_profile_ = service.config_.get<std::string>("dds.profiles_file");
+  if (service.dds_profile_.empty() && std::getenv(dds::kProfilesEnvVar) == nullptr) {
+    // Neither flag, config nor environment names one: use the shipped single-host profile.
+    service.dds_profile_ =
+        (std::filesystem::path(INDRIVE_SOURCE_DIR) / "deploy/dds/single_host.xml").string();
+  }
+  agent::validate(service.agent());
+  return service;
+}
+
+agent::AgentConfig ServiceConfig::agent() const {
+  const std::string preset = config_.preset().empty() ? kDefaultPreset : config_.preset();
+  agent::AgentConfig agent = agent::preset(preset);
+  for (const auto& [key, value] : config_.values()) {
+    if (!key.starts_with(kAgentPrefix)) continue;
+    const std::string agent_key = key.substr(std::string(kAgentPrefix).size());
+    std::string text;
+    if (const auto* number = std::get_if<double>(&value)) {
+      text = number_text(*number);
+    } else if (const auto* flag = std::get_if<bool>(&value)) {
+      text = *flag ? "true" : "false";
+    } else {
+      text = std::get<std::string>(value);
+    }
+    agent::set_config_value(agent, agent_key, text);
+  }
+  agent.seed = static_cast<std::uint64_t>(config_.get<std::int64_t>("run.seed"));
+  return agent;
+}
+
+env::EnvConfig ServiceConfig::env() const {
+  const agent::AgentConfig agent = this->agent();
+  env::EnvConfig env;
+  env.town = config_.get<std::string>("env.town");
+  env.sumo.mode = config_.get<std::string>("env.sumo_mode") == "libtraci" ? env::SumoMode::kLibtraci
+                                                                          : env::SumoMode::kLibsumo;
+  env.camera.width = agent.world_model.image;
+  env.camera.height = agent.world_model.image;
+  env.events.time_limit_steps = config_.get<int>("env.time_limit_steps");
+  if (agent.phase != agent::Phase::kPretrain) env.task = agent.task;
+  return env;
+}
+
+msg::Phase ServiceConfig::wire_phase() const { return to_wire(agent().phase); }
+
+msg::Phase to_wire(agent::Phase phase) {
+  switch (phase) {
+    case agent::Phase::kPretrain:
+      return msg::PHASE_PRETRAIN;
+    case agent::Phase::kFinetune:
+      return msg::PHASE_FINETUNE;
+    case agent::Phase::kDreamer:
+      return msg::PHASE_DREAMER;
+  }
+  return msg::PHASE_PRETRAIN;
+}
+
+std::string architecture_descriptor(const agent::AgentConfig& config) {
+  const auto& wm = config.world_model;
+  const bool task_actor = config.phase != agent::Phase::kPretrain;
+  return "image=" + std::to_string(wm.image) + " channels=" + std::to_string(wm.channels) +
+         " cnn_depth=" + std::to_string(wm.cnn_depth) + " deter=" + std::to_string(wm.deter) +
+         " units=" + std::to_string(wm.units) + " stoch=" + std::to_string(wm.stoch) + "x" +
+         std::to_string(wm.classes) + " head_layers=" + std::to_string(wm.head_layers) +
+         " actor=" + (task_actor ? "task_actor:" : "expl_actor:") +
+         std::to_string(config.behavior.units) + "x" + std::to_string(config.behavior.layers);
+}
+
+}  // namespace indrive::actor

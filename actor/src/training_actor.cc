@@ -1,0 +1,377 @@
+#include "indrive/actor/training_actor.h"
+
+#include <chrono>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "indrive/actor/chunk_builder.h"
+#include "indrive/actor/snapshot_inbox.h"
+#include "indrive/common/agent/policy.h"
+#include "indrive/common/check.h"
+#include "indrive/common/dds.h"
+#include "indrive/common/log.h"
+#include "indrive/common/nn/nn.h"
+
+namespace indrive::actor {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+double unix_time_s() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// The learner's pacing as this actor knows it. The allowance caps the total steps of all
+// actors; the learner's heartbeat says how many it has received, and this actor adds the steps
+// it took since that heartbeat arrived, so several actors overshoot by at most their in-flight
+// steps.
+class AllowanceGate {
+ public:
+  explicit AllowanceGate(std::string run_id) : run_id_(std::move(run_id)) {}
+
+  void on_allowance(const msg::StepAllowance& allowance) {
+    if (dds::validate(allowance, run_id_) != dds::DropReason::kOk) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    allowed_ = allowance.total_env_steps();
+    have_allowance_ = true;
+    if (allowance.learner_epoch() != epoch_) {
+      if (epoch_ != 0) {
+        INDRIVE_LOG(kInfo, "actor")
+            << "learner restarted (epoch " << allowance.learner_epoch() << ")";
+      }
+      epoch_ = allowance.learner_epoch();
+    }
+  }
+
+  void on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::uint64_t own_steps) {
+    if (heartbeat.role() != msg::ROLE_LEARNER) return;
+    if (dds::validate(heartbeat, run_id_) != dds::DropReason::kOk) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    received_ = heartbeat.env_steps();
+    own_at_heartbeat_ = own_steps;
+  }
+
+  // True when one more step stays within the allowance.
+  bool may_step(std::uint64_t own_steps) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!have_allowance_) return false;
+    const std::uint64_t estimate = received_ + (own_steps - std::min(own_steps, own_at_heartbeat_));
+    return estimate < allowed_;
+  }
+
+ private:
+  std::string run_id_;
+  mutable std::mutex mutex_;
+  bool have_allowance_ = false;
+  std::uint64_t allowed_ = 0;
+  std::uint64_t epoch_ = 0;
+  std::uint64_t received_ = 0;
+  std::uint64_t own_at_heartbeat_ = 0;
+};
+
+}  // namespace
+
+struct TrainingActor::Impl {
+  Impl(const ServiceConfig& service, std::uint32_t actor_id)
+      : config(service),
+        id(actor_id),
+        agent_config(service.agent()),
+        env_config(service.env()),
+        chunk_length(service.config().get<int>("actor.chunk_length")),
+        heartbeat_period_s(service.config().get<double>("actor.heartbeat_s")),
+        with_rewards(agent_config.phase != agent::Phase::kPretrain),
+        inbox(service.run_id(), architecture_descriptor(agent_config),
+              service.config().get<double>("actor.request_after_s")),
+        gate(service.run_id()),
+        builder({.run_id = service.run_id(),
+                 .actor_id = actor_id,
+                 .height = agent_config.world_model.image,
+                 .width = agent_config.world_model.image,
+                 .chunk_length = chunk_length,
+                 .phase = service.wire_phase(),
+                 .with_rewards = with_rewards}),
+        policy(agent_config),
+        random_policy(static_cast<std::uint64_t>(service.config().get<std::int64_t>("run.seed")) *
+                          1000003u +
+                      actor_id),
+        rng(static_cast<std::uint64_t>(service.config().get<std::int64_t>("run.seed")) * 7919u +
+            actor_id + 1) {
+    // DDS first: a learner can see this actor while SUMO is still loading.
+    participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
+        .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
+    chunk_writer = participant->make_writer<msg::TrajectoryChunk>();
+    result_writer = participant->make_writer<msg::EpisodeResult>();
+    heartbeat_writer = participant->make_writer<msg::Heartbeat>();
+    request_writer = participant->make_writer<msg::SnapshotRequest>();
+    policy_reader = participant->make_reader<msg::PolicySnapshot>(
+        [this](const msg::PolicySnapshot& snapshot) { inbox.offer(snapshot); });
+    announce_reader = participant->make_reader<msg::SnapshotAnnounce>(
+        [this](const msg::SnapshotAnnounce& announce) { inbox.announce(announce); });
+    allowance_reader = participant->make_reader<msg::StepAllowance>(
+        [this](const msg::StepAllowance& allowance) { gate.on_allowance(allowance); });
+    heartbeat_reader =
+        participant->make_reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
+          gate.on_learner_heartbeat(heartbeat, own_steps.load());
+        });
+    heartbeat("starting");
+
+    densities = service.config().get<std::vector<double>>("env.densities");
+    density_period = service.config().get<std::int64_t>("env.density_period_steps");
+    route = service.config().get<std::string>("env.route");
+    env = std::make_unique<env::Env>(env_config);
+    INDRIVE_LOG(kInfo, "actor") << "actor " << id << " of run '" << service.run_id()
+                                << "' ready: town " << env_config.town << ", image "
+                                << agent_config.world_model.image << ", architecture '"
+                                << architecture_descriptor(agent_config) << "'";
+  }
+
+  ~Impl() {
+    // Readers and writers before the participant.
+    policy_reader.reset();
+    announce_reader.reset();
+    allowance_reader.reset();
+    heartbeat_reader.reset();
+    chunk_writer.reset();
+    result_writer.reset();
+    heartbeat_writer.reset();
+    request_writer.reset();
+    participant.reset();
+  }
+
+  void heartbeat(const char* state) {
+    msg::Heartbeat beat;
+    beat.role(msg::ROLE_ACTOR);
+    beat.id(id);
+    beat.run_id(config.run_id());
+    beat.state(state);
+    beat.policy_version(stats.policy_version);
+    beat.env_steps(stats.env_steps);
+    beat.dropped_messages(inbox.drops().dropped() + inbox.architecture_rejects());
+    beat.wall_time_s(unix_time_s());
+    dds::seal(beat);
+    heartbeat_writer->write(beat);
+    last_heartbeat = Clock::now();
+  }
+
+  void maybe_heartbeat(const char* state) {
+    if (seconds_since(last_heartbeat) >= heartbeat_period_s) heartbeat(state);
+  }
+
+  // Writes a chunk, retrying while the learner's history is full (back-pressure).
+  void publish(msg::TrajectoryChunk chunk, const std::atomic<bool>& stop) {
+    const auto start = Clock::now();
+    while (!chunk_writer->write(chunk)) {
+      if (stop.load()) return;
+      INDRIVE_LOG(kDebug, "actor") << "chunk writer blocked; retrying";
+      maybe_heartbeat("blocked");
+    }
+    ++stats.chunks;
+    stats.publish_s += seconds_since(start);
+  }
+
+  // Loads a newer snapshot if one arrived; the open chunk is sent first so that every chunk
+  // is made by one policy version.
+  void maybe_swap(const std::atomic<bool>& stop) {
+    auto snapshot = inbox.take_newer_than(stats.policy_version);
+    if (snapshot == nullptr) return;
+    if (!builder.empty() && builder.policy_version() != snapshot->version()) {
+      publish(builder.take(), stop);
+    }
+    const auto start = Clock::now();
+    try {
+      policy.load_snapshot(snapshot->params());
+    } catch (const std::exception& error) {
+      ++stats.snapshots_rejected;
+      INDRIVE_LOG(kError, "actor")
+          << "rejected snapshot v" << snapshot->version() << ": " << error.what();
+      stats.policy_version = snapshot->version();  // do not retry the same bytes
+      return;
+    }
+    const bool first = !have_policy;
+    have_policy = true;
+    restart_state = true;
+    stats.policy_version = snapshot->version();
+    ++stats.snapshots_loaded;
+    INDRIVE_LOG_AT(first ? log::Level::kInfo : log::Level::kDebug, "actor")
+        << "acting with snapshot v" << snapshot->version() << " (" << snapshot->params().size()
+        << " bytes, loaded in " << seconds_since(start) * 1000.0 << " ms)";
+  }
+
+  void maybe_request() {
+    if (!inbox.should_request(stats.policy_version, Clock::now())) return;
+    msg::SnapshotRequest request;
+    request.run_id(config.run_id());
+    request.version(0);
+    request.requester_role(msg::ROLE_ACTOR);
+    request.requester_id(id);
+    dds::seal(request);
+    request_writer->write(request);
+    ++stats.snapshot_requests;
+    INDRIVE_LOG(kInfo, "actor") << "announced snapshot v" << inbox.announced_version()
+                                << " not received; requested it again";
+  }
+
+  // Blocks while the allowance is used up, keeping heartbeats and snapshot swaps going.
+  void wait_for_allowance(const std::atomic<bool>& stop) {
+    if (gate.may_step(own_steps.load())) return;
+    const auto start = Clock::now();
+    while (!stop.load() && !gate.may_step(own_steps.load())) {
+      maybe_heartbeat("waiting");
+      maybe_request();
+      maybe_swap(stop);
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    stats.wait_s += seconds_since(start);
+  }
+
+  int choose_action(const env::StepResult& result) {
+    if (result.is_last) return 0;  // no action follows the last frame
+    if (!have_policy) return random_policy.act();
+    const cv::Mat& frame = result.observation;
+    const bool first = result.is_first || restart_state;
+    restart_state = false;
+    return policy.act(std::span<const std::uint8_t>(frame.data, frame.total()), first, policy_state,
+                      /*sample=*/true);
+  }
+
+  void publish_result(const env::StepResult& last, double episode_return) {
+    msg::EpisodeResult result;
+    result.run_id(config.run_id());
+    result.sender_role(msg::ROLE_ACTOR);
+    result.sender_id(id);
+    result.phase(config.wire_phase());
+    result.policy_version(stats.policy_version);
+    result.town(env_config.town);
+    result.route(route);
+    result.density(static_cast<std::uint32_t>(density));
+    result.traffic_seed(static_cast<std::uint32_t>(traffic_seed));
+    result.spawn_seed(static_cast<std::uint32_t>(spawn_seed));
+    // Without a route, an episode succeeds when it ends by the time limit alone.
+    const std::uint32_t failures = route.empty()
+                                       ? (last.events & env::kFailureEvents & ~env::kTimeLimit)
+                                       : (last.events & env::kFailureEvents);
+    result.success(route.empty() ? failures == 0 : (last.events & env::kDestination) != 0);
+    result.failure_reason(failures == 0 ? "" : env::event_names(failures));
+    result.steps(static_cast<std::uint32_t>(last.step));
+    const env::Route* driven = env->route();
+    result.route_completion(
+        driven == nullptr || driven->length_m() <= 0.0
+            ? 0.0f
+            : static_cast<float>(std::min(1.0, last.route_progress_m / driven->length_m())));
+    result.episode_return(static_cast<float>(episode_return));
+    dds::seal(result);
+    result_writer->write(result);
+  }
+
+  void run(const std::atomic<bool>& stop) {
+    const auto start = Clock::now();
+    std::uint64_t episode_id = 0;
+    std::int64_t next_density_draw = 0;
+    const int pixels = agent_config.world_model.image * agent_config.world_model.image;
+    while (!stop.load()) {
+      // Episode choices: density redrawn every density_period steps, fresh seeds per episode.
+      if (static_cast<std::int64_t>(stats.env_steps) >= next_density_draw) {
+        density = static_cast<int>(densities[rng() % densities.size()]);
+        next_density_draw += density_period;
+      }
+      traffic_seed = rng() % 1000000u;
+      spawn_seed = rng() % 1000000u;
+      env::StepResult result = env->reset({.route = route,
+                                           .density = density,
+                                           .traffic_seed = traffic_seed,
+                                           .spawn_seed = spawn_seed});
+      policy_state = agent::PolicyState{};
+      double episode_return = 0.0;
+      while (!stop.load()) {
+        maybe_swap(stop);
+        wait_for_allowance(stop);
+        if (stop.load()) break;
+        const int action = choose_action(result);
+        INDRIVE_CHECK_EQ(result.observation.total(), static_cast<std::size_t>(pixels))
+            << "the camera must render the preset's image size";
+        std::optional<float> reward;
+        if (with_rewards) reward = static_cast<float>(result.reward.value_or(0.0));
+        const bool complete =
+            builder.add({.frame = {result.observation.data, static_cast<std::size_t>(pixels)},
+                         .action = action,
+                         .is_first = result.is_first,
+                         .is_last = result.is_last,
+                         .is_terminal = result.is_terminal,
+                         .events = result.events,
+                         .reward = reward,
+                         .episode_id = episode_id,
+                         .episode_step = static_cast<std::uint64_t>(result.step),
+                         .policy_version = stats.policy_version});
+        ++stats.env_steps;
+        own_steps.store(stats.env_steps);
+        episode_return += reward.value_or(0.0f);
+        if (complete) publish(builder.take(), stop);
+        maybe_heartbeat("running");
+        maybe_request();
+        if (result.is_last) {
+          publish_result(result, episode_return);
+          ++stats.episodes;
+          break;
+        }
+        result = env->step(action);
+      }
+      ++episode_id;
+      // A stopped episode's open chunk is dropped: the learner never gets a partial chunk.
+    }
+    heartbeat("stopping");
+    stats.total_s = seconds_since(start);
+    INDRIVE_LOG(kInfo, "actor") << "actor " << id << " stops: " << stats.env_steps << " steps, "
+                                << stats.chunks << " chunks, " << stats.episodes
+                                << " episodes, policy v" << stats.policy_version << ", waited "
+                                << stats.wait_s << " s of " << stats.total_s << " s";
+  }
+
+  const ServiceConfig& config;
+  std::uint32_t id;
+  agent::AgentConfig agent_config;
+  env::EnvConfig env_config;
+  int chunk_length;
+  double heartbeat_period_s;
+  bool with_rewards;
+  SnapshotInbox inbox;
+  AllowanceGate gate;
+  ChunkBuilder builder;
+  agent::Policy policy;
+  agent::RandomPolicy random_policy;
+  std::mt19937_64 rng;
+  std::unique_ptr<dds::Participant> participant;
+  std::unique_ptr<dds::Writer<msg::TrajectoryChunk>> chunk_writer;
+  std::unique_ptr<dds::Writer<msg::EpisodeResult>> result_writer;
+  std::unique_ptr<dds::Writer<msg::Heartbeat>> heartbeat_writer;
+  std::unique_ptr<dds::Writer<msg::SnapshotRequest>> request_writer;
+  std::unique_ptr<dds::Reader<msg::PolicySnapshot>> policy_reader;
+  std::unique_ptr<dds::Reader<msg::SnapshotAnnounce>> announce_reader;
+  std::unique_ptr<dds::Reader<msg::StepAllowance>> allowance_reader;
+  std::unique_ptr<dds::Reader<msg::Heartbeat>> heartbeat_reader;
+  std::unique_ptr<env::Env> env;
+  std::vector<double> densities;
+  std::int64_t density_period = 10000;
+  std::string route;
+  int density = 10;
+  std::uint64_t traffic_seed = 0;
+  std::uint64_t spawn_seed = 0;
+  agent::PolicyState policy_state;
+  bool have_policy = false;
+  bool restart_state = false;
+  std::atomic<std::uint64_t> own_steps{0};
+  Clock::time_point last_heartbeat{};
+  ActorStats stats;
+};
+
+TrainingActor::TrainingActor(const ServiceConfig& config, std::uint32_t id)
+    : impl_(std::make_unique<Impl>(config, id)) {}
+TrainingActor::~TrainingActor() = default;
+void TrainingActor::run(const std::atomic<bool>& stop) { impl_->run(stop); }
+const ActorStats& TrainingActor::stats() const { return impl_->stats; }
+
+}  // namespace indrive::actor

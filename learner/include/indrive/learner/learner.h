@@ -1,0 +1,81 @@
+// The learner process: receives chunks, keeps replay, trains the agent at the configured
+// replay ratio, publishes versioned policy snapshots, the step allowance, announces and
+// heartbeats, logs metrics and checkpoints so that a restart resumes the run.
+//
+//   ServiceConfig config = ServiceConfig::resolve(options);
+//   Learner learner(config);                          // resumes from the newest checkpoint
+//   learner.on_progress([](const std::string& line) { std::puts(line.c_str()); });
+//   int code = learner.run(stop_flag);                // until the budget or stop_flag
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "indrive/actor/service_config.h"
+
+namespace indrive::learner {
+
+// A checkpoint of the learner could not be read (the message names the file and the fault).
+class CheckpointError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Counters a checkpoint carries besides the agent, so that a restart continues them.
+struct LearnerCounters {
+  std::int64_t env_steps = 0;  // steps received and stored
+  std::int64_t updates = 0;    // training steps done
+  std::uint64_t policy_version = 0;
+  std::uint64_t learner_epoch = 0;  // starts of the learner in this run
+};
+
+// A learner checkpoint: a header line, the counters as one JSON line, then the agent's own
+// checkpoint bytes.
+std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
+                                          std::span<const std::uint8_t> agent_bytes);
+// Splits a packed checkpoint; throws CheckpointError when it is not one.
+LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
+                                  std::vector<std::uint8_t>& agent_bytes);
+
+// What the learner has done, readable after run().
+struct LearnerStats {
+  LearnerCounters counters;
+  std::uint64_t chunks = 0;
+  std::uint64_t dropped_chunks = 0;
+  std::uint64_t sequence_gaps = 0;  // chunks whose predecessor of the same actor never came
+  std::uint64_t snapshots_published = 0;
+  std::uint64_t snapshot_requests = 0;
+  std::uint64_t episodes = 0;
+  std::uint64_t failed_updates = 0;
+  std::uint64_t checkpoints = 0;
+};
+
+class Learner {
+ public:
+  // Opens the run directory (writes config.yaml), builds the agent and replay, resumes from
+  // the newest checkpoint if any, and sets up DDS. Throws CheckpointError, agent::AgentError,
+  // dds::DdsError or IoError with what is wrong.
+  explicit Learner(const actor::ServiceConfig& config);
+  ~Learner();
+  Learner(const Learner&) = delete;
+  Learner& operator=(const Learner&) = delete;
+
+  // Receives a console progress line every log interval (the executable prints it).
+  void on_progress(std::function<void(const std::string&)> callback);
+  // Trains until the env-step budget is reached (returns 0) or `stop` is set (checkpoints,
+  // then returns 0).
+  int run(const std::atomic<bool>& stop);
+  const LearnerStats& stats() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace indrive::learner

@@ -1,0 +1,505 @@
+#include "indrive/learner/learner.h"
+
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+#include <thread>
+
+#include "indrive/common/agent/agent.h"
+#include "indrive/common/check.h"
+#include "indrive/common/dds.h"
+#include "indrive/common/log.h"
+#include "indrive/common/run_dir.h"
+#include "indrive/learner/ingest.h"
+#include "indrive/learner/rate_limiter.h"
+
+namespace indrive::learner {
+namespace fs = std::filesystem;
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr std::string_view kCheckpointMagic = "INDRIVE-LEARNER-CHECKPOINT 1\n";
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+double unix_time_s() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
+                                          std::span<const std::uint8_t> agent_bytes) {
+  const nlohmann::json meta = {{"env_steps", counters.env_steps},
+                               {"updates", counters.updates},
+                               {"policy_version", counters.policy_version},
+                               {"learner_epoch", counters.learner_epoch}};
+  const std::string head = std::string(kCheckpointMagic) + meta.dump() + "\n";
+  std::vector<std::uint8_t> bytes(head.begin(), head.end());
+  bytes.insert(bytes.end(), agent_bytes.begin(), agent_bytes.end());
+  return bytes;
+}
+
+LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
+                                  std::vector<std::uint8_t>& agent_bytes) {
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  if (!text.starts_with(kCheckpointMagic)) {
+    throw CheckpointError("not a learner checkpoint (its first line is not '" +
+                          std::string(kCheckpointMagic.substr(0, kCheckpointMagic.size() - 1)) +
+                          "')");
+  }
+  const std::size_t meta_end = text.find('\n', kCheckpointMagic.size());
+  if (meta_end == std::string_view::npos) {
+    throw CheckpointError("learner checkpoint is truncated inside its counters line");
+  }
+  LearnerCounters counters;
+  try {
+    const auto meta = nlohmann::json::parse(
+        text.substr(kCheckpointMagic.size(), meta_end - kCheckpointMagic.size()));
+    counters.env_steps = meta.at("env_steps").get<std::int64_t>();
+    counters.updates = meta.at("updates").get<std::int64_t>();
+    counters.policy_version = meta.at("policy_version").get<std::uint64_t>();
+    counters.learner_epoch = meta.at("learner_epoch").get<std::uint64_t>();
+  } catch (const nlohmann::json::exception& error) {
+    throw CheckpointError(std::string("learner checkpoint counters are unreadable: ") +
+                          error.what());
+  }
+  agent_bytes.assign(bytes.begin() + static_cast<std::ptrdiff_t>(meta_end + 1), bytes.end());
+  return counters;
+}
+
+struct Learner::Impl {
+  explicit Impl(const actor::ServiceConfig& service)
+      : config(service),
+        agent_config(service.agent()),
+        run(RunDir::open_or_create(service.run_dir().parent_path().empty()
+                                       ? fs::path(".")
+                                       : service.run_dir().parent_path(),
+                                   service.run_id())),
+        checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
+        agent(agent_config),
+        replay({.capacity = agent_config.replay.capacity,
+                .height = agent_config.world_model.image,
+                .width = agent_config.world_model.image,
+                .has_rewards = agent_config.phase != agent::Phase::kPretrain,
+                .seed = agent_config.replay.seed + agent_config.seed}),
+        rate({.replay_ratio = service.config().get<double>("learner.replay_ratio"),
+              .steps_per_update =
+                  static_cast<std::int64_t>(agent_config.replay.batch) * agent_config.replay.length,
+              .prefill = agent_config.replay.prefill,
+              // At least one chunk, so an actor can always finish the chunk it holds.
+              .slack = std::max(service.config().get<std::int64_t>("learner.allowance_slack"),
+                                service.config().get<std::int64_t>("actor.chunk_length")),
+              .async = service.config().get<bool>("learner.async")}),
+        ingest({.run_id = service.run_id(),
+                .height = agent_config.world_model.image,
+                .width = agent_config.world_model.image,
+                .phase = service.wire_phase(),
+                .with_rewards = agent_config.phase != agent::Phase::kPretrain}),
+        metrics(run.metrics_path()) {
+    const auto& c = service.config();
+    budget = c.get<std::int64_t>("run.budget_env_steps");
+    snapshot_every = c.get<std::int64_t>("learner.snapshot_every");
+    announce_s = c.get<double>("learner.announce_s");
+    log_interval_s = c.get<double>("learner.log_interval_s");
+    checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
+    config.config().write_yaml(run.config_path());
+
+    resume();
+    fill_target = std::min<std::int64_t>(agent_config.replay.prefill, agent_config.replay.capacity);
+    fill_floor = stats.counters.env_steps + agent_config.replay.prefill;
+
+    participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
+        .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
+    policy_writer = participant->make_writer<msg::PolicySnapshot>();
+    announce_writer = participant->make_writer<msg::SnapshotAnnounce>();
+    allowance_writer = participant->make_writer<msg::StepAllowance>();
+    heartbeat_writer = participant->make_writer<msg::Heartbeat>();
+    chunk_reader = participant->make_reader<msg::TrajectoryChunk>(
+        [this](const msg::TrajectoryChunk& chunk) { on_chunk(chunk); });
+    result_reader = participant->make_reader<msg::EpisodeResult>(
+        [this](const msg::EpisodeResult& result) { on_result(result); });
+    request_reader =
+        participant->make_reader<msg::SnapshotRequest>([this](const msg::SnapshotRequest& request) {
+          if (dds::validate(request, config.run_id()) != dds::DropReason::kOk) return;
+          republish_requested.store(true);
+        });
+    // A resumed learner hands out its restored policy at once, under a new version.
+    if (stats.counters.updates > 0) publish_snapshot();
+    publish_pacing(/*force=*/true);
+    INDRIVE_LOG(kInfo, "learner") << "learner of run '" << config.run_id() << "' ready (epoch "
+                                  << stats.counters.learner_epoch << ", "
+                                  << stats.counters.env_steps << " env steps, "
+                                  << stats.counters.updates << " updates, policy v"
+                                  << stats.counters.policy_version << "); architecture '"
+                                  << actor::architecture_descriptor(agent_config) << "'";
+  }
+
+  ~Impl() {
+    chunk_reader.reset();
+    result_reader.reset();
+    request_reader.reset();
+    policy_writer.reset();
+    announce_writer.reset();
+    allowance_writer.reset();
+    heartbeat_writer.reset();
+    participant.reset();
+  }
+
+  // Restores the newest checkpoint of this run, or a finetune's initial checkpoint.
+  void resume() {
+    std::vector<std::uint8_t> agent_bytes;
+    if (auto newest = checkpoints.newest()) {
+      stats.counters = unpack_checkpoint(read_file(*newest), agent_bytes);
+      load_agent(agent_bytes);
+      INDRIVE_LOG(kInfo, "learner") << "resumed from " << newest->string();
+    } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
+               !init.empty()) {
+      const auto bytes = read_file(init);
+      try {
+        unpack_checkpoint(bytes, agent_bytes);
+      } catch (const CheckpointError&) {
+        agent_bytes = bytes;  // a bare agent checkpoint
+      }
+      load_agent(agent_bytes);
+      INDRIVE_LOG(kInfo, "learner") << "initialised from " << init;
+    }
+    ++stats.counters.learner_epoch;
+  }
+
+  void load_agent(const std::vector<std::uint8_t>& bytes) {
+    const fs::path staging = run.checkpoints() / "agent-staging.bin";
+    atomic_write(staging, bytes);
+    agent.load_checkpoint(staging);
+    fs::remove(staging);
+  }
+
+  void save_checkpoint() {
+    const auto start = Clock::now();
+    const fs::path staging = run.checkpoints() / "agent-staging.bin";
+    agent.save_checkpoint(staging);
+    const auto agent_bytes = read_file(staging);
+    fs::remove(staging);
+    const fs::path path = checkpoints.save(static_cast<std::uint64_t>(stats.counters.updates),
+                                           pack_checkpoint(stats.counters, agent_bytes));
+    ++stats.checkpoints;
+    last_checkpoint = Clock::now();
+    INDRIVE_LOG(kInfo, "learner") << "checkpoint " << path.filename().string() << " ("
+                                  << agent_bytes.size() << " bytes, " << seconds_since(start)
+                                  << " s)";
+  }
+
+  // DDS thread: decode and queue; the acting thread owns the replay buffer.
+  void on_chunk(const msg::TrajectoryChunk& chunk) {
+    DecodedChunk decoded;
+    const dds::DropReason reason = decode_chunk(chunk, ingest, decoded);
+    drops.record(reason);
+    if (reason != dds::DropReason::kOk) {
+      INDRIVE_LOG(kWarn, "learner")
+          << "dropped chunk " << chunk.chunk_seq() << " of actor " << chunk.actor_id() << " (run '"
+          << chunk.run_id() << "'): " << dds::drop_reason_name(reason);
+      return;
+    }
+    std::lock_guard<std::mutex> lock(queue_mutex);
+    queue.push_back(std::move(decoded));
+  }
+
+  void on_result(const msg::EpisodeResult& result) {
+    if (dds::validate(result, config.run_id()) != dds::DropReason::kOk) return;
+    if (result.sender_role() != msg::ROLE_ACTOR) return;
+    std::lock_guard<std::mutex> lock(queue_mutex);
+    ++interval_episodes;
+    interval_successes += result.success() ? 1 : 0;
+    interval_episode_steps += result.steps();
+  }
+
+  // Moves queued chunks into replay; returns whether there were any.
+  bool drain() {
+    std::deque<DecodedChunk> taken;
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex);
+      taken.swap(queue);
+    }
+    for (DecodedChunk& chunk : taken) {
+      // A missing predecessor (lost chunk) must not glue two pieces of trajectory together.
+      auto expected = next_seq.find(chunk.actor_id);
+      if (chunk.chunk_seq != 0 && expected != next_seq.end() &&
+          expected->second != chunk.chunk_seq) {
+        ++stats.sequence_gaps;
+        chunk.steps.front().is_first = true;
+      }
+      next_seq[chunk.actor_id] = chunk.chunk_seq + 1;
+      for (const auto& step : chunk.steps) replay.add(static_cast<int>(chunk.actor_id), step);
+      stats.counters.env_steps += static_cast<std::int64_t>(chunk.steps.size());
+      ++stats.chunks;
+      interval_lag_sum += static_cast<double>(stats.counters.policy_version - chunk.policy_version);
+      ++interval_chunks;
+    }
+    return !taken.empty();
+  }
+
+  bool ready_to_train() const {
+    if (replay.size() < fill_target || replay.num_windows(agent_config.replay.length) == 0) {
+      return false;
+    }
+    if (rate.options().async) return true;
+    return stats.counters.updates < rate.updates_due(stats.counters.env_steps);
+  }
+
+  void train_one() {
+    agent::SequenceBatch batch =
+        replay.sample(agent_config.replay.batch, agent_config.replay.length);
+    try {
+      last_metrics = agent.train_step(batch);
+    } catch (const std::exception& error) {
+      // A failed update is counted and skipped; the run goes on.
+      ++stats.failed_updates;
+      INDRIVE_LOG(kError, "learner") << "update failed and was skipped: " << error.what();
+    }
+    ++stats.counters.updates;
+    if (stats.counters.updates % snapshot_every == 0) publish_snapshot();
+  }
+
+  void publish_snapshot() {
+    msg::PolicySnapshot snapshot;
+    snapshot.run_id(config.run_id());
+    snapshot.version(++stats.counters.policy_version);
+    snapshot.preset(agent_config.preset);
+    snapshot.architecture(actor::architecture_descriptor(agent_config));
+    snapshot.heads(msg::HEAD_ENCODER | msg::HEAD_RSSM |
+                   (agent_config.phase == agent::Phase::kPretrain ? msg::HEAD_EXPLORATION_ACTOR
+                                                                  : msg::HEAD_TASK_ACTOR));
+    snapshot.phase(config.wire_phase());
+    snapshot.env_steps(static_cast<std::uint64_t>(stats.counters.env_steps));
+    snapshot.updates(static_cast<std::uint64_t>(stats.counters.updates));
+    snapshot.params(agent.snapshot());
+    dds::seal(snapshot);
+    policy_writer->write(snapshot);
+    newest_snapshot = std::move(snapshot);
+    ++stats.snapshots_published;
+    publish_announce();
+  }
+
+  void publish_announce() {
+    if (!newest_snapshot) return;
+    msg::SnapshotAnnounce announce;
+    announce.run_id(config.run_id());
+    announce.version(newest_snapshot->version());
+    announce.checksum(newest_snapshot->checksum());
+    announce.size_bytes(newest_snapshot->params().size());
+    dds::seal(announce);
+    announce_writer->write(announce);
+    last_announce = Clock::now();
+  }
+
+  std::uint64_t allowance() const {
+    std::uint64_t allowed = rate.allowance(stats.counters.updates, fill_floor);
+    if (budget > 0) allowed = std::min<std::uint64_t>(allowed, static_cast<std::uint64_t>(budget));
+    return allowed;
+  }
+
+  // Publishes the allowance when it changed and the learner's heartbeat (which tells actors
+  // how many steps arrived) at least every 100 ms.
+  void publish_pacing(bool force) {
+    const std::uint64_t allowed = allowance();
+    const bool changed =
+        allowed != published_allowance || stats.counters.env_steps != published_received;
+    if (!force && !(changed && seconds_since(last_pacing) > 0.005) &&
+        seconds_since(last_pacing) < 0.1) {
+      return;
+    }
+    msg::StepAllowance message;
+    message.run_id(config.run_id());
+    message.total_env_steps(allowed);
+    message.replay_ratio(rate.options().replay_ratio);
+    message.learner_epoch(stats.counters.learner_epoch);
+    message.policy_version(stats.counters.policy_version);
+    dds::seal(message);
+    allowance_writer->write(message);
+
+    msg::Heartbeat beat;
+    beat.role(msg::ROLE_LEARNER);
+    beat.id(0);
+    beat.run_id(config.run_id());
+    beat.state(done ? "done" : "running");
+    beat.policy_version(stats.counters.policy_version);
+    beat.env_steps(static_cast<std::uint64_t>(stats.counters.env_steps));
+    beat.updates(static_cast<std::uint64_t>(stats.counters.updates));
+    beat.dropped_messages(drops.dropped());
+    beat.wall_time_s(unix_time_s());
+    dds::seal(beat);
+    heartbeat_writer->write(beat);
+    published_allowance = allowed;
+    published_received = stats.counters.env_steps;
+    last_pacing = Clock::now();
+  }
+
+  void log_metrics() {
+    const double elapsed = seconds_since(last_log);
+    if (elapsed < log_interval_s) return;
+    const std::int64_t steps = stats.counters.env_steps - logged_steps;
+    const std::int64_t updates = stats.counters.updates - logged_updates;
+    const double ratio = stats.counters.env_steps > 0
+                             ? static_cast<double>(stats.counters.updates) *
+                                   rate.options().steps_per_update /
+                                   static_cast<double>(stats.counters.env_steps)
+                             : 0.0;
+    std::uint64_t episodes = 0, successes = 0, episode_steps = 0;
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex);
+      std::swap(episodes, interval_episodes);
+      std::swap(successes, interval_successes);
+      std::swap(episode_steps, interval_episode_steps);
+    }
+    stats.episodes += episodes;
+    const double lag = interval_chunks > 0 ? interval_lag_sum / interval_chunks : 0.0;
+    nlohmann::json record = {{"env_steps", stats.counters.env_steps},
+                             {"updates", stats.counters.updates},
+                             {"env_steps_per_s", steps / elapsed},
+                             {"updates_per_s", updates / elapsed},
+                             {"replay_ratio", ratio},
+                             {"policy_version", stats.counters.policy_version},
+                             {"policy_lag", lag},
+                             {"replay_size", replay.size()},
+                             {"chunks", stats.chunks},
+                             {"dropped_chunks", drops.dropped()},
+                             {"dropped_wrong_run", drops.count(dds::DropReason::kWrongRun)},
+                             {"dropped_bad_checksum", drops.count(dds::DropReason::kBadChecksum)},
+                             {"dropped_bad_shape", drops.count(dds::DropReason::kBadShape)},
+                             {"dropped_wrong_schema", drops.count(dds::DropReason::kWrongSchema)},
+                             {"sequence_gaps", stats.sequence_gaps},
+                             {"failed_updates", stats.failed_updates},
+                             {"episodes", episodes},
+                             {"learner_epoch", stats.counters.learner_epoch},
+                             {"phase", std::string(agent::to_string(agent_config.phase))}};
+    if (episodes > 0) {
+      record["episode_success_rate"] = static_cast<double>(successes) / episodes;
+      record["episode_length"] = static_cast<double>(episode_steps) / episodes;
+    }
+    for (const auto& [name, value] : last_metrics) record[name] = value;
+    metrics.write(record);
+
+    std::ostringstream line;
+    line.precision(3);
+    line << "steps " << stats.counters.env_steps << " | updates " << stats.counters.updates << " | "
+         << steps / elapsed << " steps/s | " << updates / elapsed << " upd/s | ratio " << ratio
+         << " | policy v" << stats.counters.policy_version << " lag " << lag << " | dropped "
+         << drops.dropped();
+    int shown = 0;
+    for (const auto& [name, value] : last_metrics) {
+      if (name.find("loss") == std::string::npos || shown++ >= 4) continue;
+      line << " | " << name << " " << value;
+    }
+    if (progress) progress(line.str());
+    last_log = Clock::now();
+    logged_steps = stats.counters.env_steps;
+    logged_updates = stats.counters.updates;
+    interval_lag_sum = 0.0;
+    interval_chunks = 0;
+  }
+
+  int run_loop(const std::atomic<bool>& stop) {
+    last_checkpoint = last_log = Clock::now();
+    logged_steps = stats.counters.env_steps;
+    logged_updates = stats.counters.updates;
+    while (!stop.load()) {
+      bool worked = drain();
+      if (ready_to_train()) {
+        train_one();
+        worked = true;
+      }
+      publish_pacing(false);
+      if (republish_requested.exchange(false) && newest_snapshot) {
+        ++stats.snapshot_requests;
+        policy_writer->write(*newest_snapshot);
+        publish_announce();
+      }
+      if (seconds_since(last_announce) >= announce_s) publish_announce();
+      log_metrics();
+      if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
+      // The budget ends the run once the updates it is owed are done.
+      if (budget > 0 && stats.counters.env_steps >= budget &&
+          (rate.options().async || !ready_to_train())) {
+        done = true;
+        break;
+      }
+      if (!worked) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    if (stats.counters.env_steps > 0 || stats.counters.updates > 0) save_checkpoint();
+    last_log = Clock::now() - std::chrono::hours(1);
+    log_metrics();
+    publish_pacing(true);
+    INDRIVE_LOG(kInfo, "learner") << (done ? "budget reached" : "stopped") << ": "
+                                  << stats.counters.env_steps << " env steps, "
+                                  << stats.counters.updates << " updates, policy v"
+                                  << stats.counters.policy_version << ", chunks " << stats.chunks
+                                  << ", " << drops.summary();
+    return 0;
+  }
+
+  const actor::ServiceConfig& config;
+  agent::AgentConfig agent_config;
+  RunDir run;
+  CheckpointFiles checkpoints;
+  agent::Agent agent;
+  agent::ReplayBuffer replay;
+  RateLimiter rate;
+  IngestOptions ingest;
+  MetricsLog metrics;
+  std::int64_t budget = 0;
+  std::int64_t snapshot_every = 10;
+  double announce_s = 1.0;
+  double log_interval_s = 5.0;
+  double checkpoint_s = 300.0;
+  std::int64_t fill_target = 0;
+  std::int64_t fill_floor = 0;
+  bool done = false;
+
+  std::unique_ptr<dds::Participant> participant;
+  std::unique_ptr<dds::Writer<msg::PolicySnapshot>> policy_writer;
+  std::unique_ptr<dds::Writer<msg::SnapshotAnnounce>> announce_writer;
+  std::unique_ptr<dds::Writer<msg::StepAllowance>> allowance_writer;
+  std::unique_ptr<dds::Writer<msg::Heartbeat>> heartbeat_writer;
+  std::unique_ptr<dds::Reader<msg::TrajectoryChunk>> chunk_reader;
+  std::unique_ptr<dds::Reader<msg::EpisodeResult>> result_reader;
+  std::unique_ptr<dds::Reader<msg::SnapshotRequest>> request_reader;
+
+  dds::DropCounters drops;
+  std::mutex queue_mutex;
+  std::deque<DecodedChunk> queue;
+  std::uint64_t interval_episodes = 0, interval_successes = 0, interval_episode_steps = 0;
+  std::map<std::uint32_t, std::uint64_t> next_seq;
+  std::atomic<bool> republish_requested{false};
+  std::optional<msg::PolicySnapshot> newest_snapshot;
+  agent::TrainMetrics last_metrics;
+  LearnerStats stats;
+  std::function<void(const std::string&)> progress;
+  std::uint64_t published_allowance = 0;
+  std::int64_t published_received = -1;
+  Clock::time_point last_pacing{}, last_announce{}, last_log{}, last_checkpoint{};
+  std::int64_t logged_steps = 0, logged_updates = 0;
+  double interval_lag_sum = 0.0;
+  std::uint64_t interval_chunks = 0;
+};
+
+Learner::Learner(const actor::ServiceConfig& config) : impl_(std::make_unique<Impl>(config)) {}
+Learner::~Learner() = default;
+void Learner::on_progress(std::function<void(const std::string&)> callback) {
+  impl_->progress = std::move(callback);
+}
+int Learner::run(const std::atomic<bool>& stop) {
+  const int code = impl_->run_loop(stop);
+  impl_->stats.dropped_chunks = impl_->drops.dropped();
+  return code;
+}
+const LearnerStats& Learner::stats() const { return impl_->stats; }
+
+}  // namespace indrive::learner

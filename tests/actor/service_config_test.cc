@@ -1,0 +1,92 @@
+#include "indrive/actor/service_config.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "testing.h"
+
+namespace indrive::actor {
+namespace {
+
+TEST(ServiceConfigTest, PresetFileAndOverridesReachTheAgentAndEnvironment) {
+  testing::TempDir dir;
+  const auto file = dir.path() / "run.yaml";
+  std::ofstream(file) << "preset: tiny\nagent:\n  intrinsic:\n    method: icm\n"
+                         "learner:\n  replay_ratio: 16\n";
+  const auto config = ServiceConfig::resolve({.config_file = file,
+                                              .run_dir = dir.path() / "runs" / "my-run",
+                                              .domain_id = 42,
+                                              .overrides = {"agent.replay.batch=4"}});
+  EXPECT_EQ(config.run_id(), "my-run");
+  EXPECT_EQ(config.domain_id(), 42);
+  const auto agent = config.agent();
+  EXPECT_EQ(agent.preset, "tiny");
+  EXPECT_EQ(agent.world_model.image, 32);
+  EXPECT_EQ(agent.world_model.deter, 128);
+  EXPECT_EQ(agent.intrinsic.method, agent::Method::kIcm);
+  EXPECT_EQ(agent.replay.batch, 4);
+  EXPECT_DOUBLE_EQ(config.config().get<double>("learner.replay_ratio"), 16.0);
+  const auto env = config.env();
+  EXPECT_EQ(env.camera.width, 32) << "the camera renders the preset's image size";
+  EXPECT_TRUE(env.task.empty()) << "pretraining computes no reward";
+  EXPECT_EQ(config.wire_phase(), msg::PHASE_PRETRAIN);
+}
+
+TEST(ServiceConfigTest, TaskPhasesSetTheEnvironmentTask) {
+  testing::TempDir dir;
+  const auto config = ServiceConfig::resolve(
+      {.run_dir = dir.path() / "r",
+       .overrides = {"agent.phase=finetune", "agent.task=collision_avoidance"}});
+  EXPECT_EQ(config.env().task, "collision_avoidance");
+  EXPECT_EQ(config.wire_phase(), msg::PHASE_FINETUNE);
+}
+
+TEST(ServiceConfigTest, MistakesThrowWithTheKeyNamed) {
+  testing::TempDir dir;
+  try {
+    ServiceConfig::resolve({.run_dir = dir.path() / "r", .overrides = {"learner.replay_ration=3"}});
+    FAIL() << "an unknown key must throw";
+  } catch (const config::ConfigError& error) {
+    EXPECT_NE(std::string(error.what()).find("learner.replay_ratio"), std::string::npos)
+        << error.what();
+  }
+  EXPECT_THROW(ServiceConfig::resolve(
+                   {.run_dir = dir.path() / "r", .overrides = {"agent.world_model.image=33"}}),
+               agent::AgentConfigError);
+  EXPECT_THROW(ServiceConfig::resolve({}), config::ConfigError);
+}
+
+TEST(ServiceConfigTest, ArchitectureDescriptorTellsPresetsAndActorsApart) {
+  const auto tiny = agent::preset("tiny");
+  auto finetune = tiny;
+  finetune.phase = agent::Phase::kFinetune;
+  EXPECT_NE(architecture_descriptor(tiny), architecture_descriptor(agent::preset("cpu")));
+  EXPECT_NE(architecture_descriptor(tiny), architecture_descriptor(finetune));
+  EXPECT_EQ(architecture_descriptor(tiny), architecture_descriptor(agent::preset("tiny")));
+}
+
+}  // namespace
+}  // namespace indrive::actor
+
+namespace indrive::actor {
+namespace {
+
+// Every shipped config must resolve, so a renamed key cannot silently break a recipe.
+TEST(ServiceConfigTest, EveryShippedConfigResolves) {
+  testing::TempDir dir;
+  int count = 0;
+  for (const auto& entry :
+       std::filesystem::directory_iterator(testing::source_path("deploy/configs"))) {
+    if (entry.path().extension() != ".yaml") continue;
+    SCOPED_TRACE(entry.path().filename().string());
+    const auto config =
+        ServiceConfig::resolve({.config_file = entry.path(), .run_dir = dir.path() / "r"});
+    EXPECT_NO_THROW(config.env());
+    ++count;
+  }
+  EXPECT_GE(count, 8);
+}
+
+}  // namespace
+}  // namespace indrive::actor

@@ -1,0 +1,271 @@
+// The service as real processes: one learner and two actors on the tiny preset over DDS on
+// this host, watched by the test through its own DDS participant.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <thread>
+
+#include "indrive/actor/chunk_builder.h"
+#include "indrive/common/dds.h"
+#include "testing.h"
+
+extern char** environ;
+
+namespace indrive {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+// A child process with its output in a log file; killed when the object dies.
+class Child {
+ public:
+  Child(std::vector<std::string> argv, const fs::path& log) {
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    posix_spawn_file_actions_adddup2(&actions, 1, 2);
+    std::vector<char*> args;
+    for (auto& arg : argv) args.push_back(arg.data());
+    args.push_back(nullptr);
+    const int error = posix_spawn(&pid_, args[0], &actions, nullptr, args.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    if (error != 0) throw std::runtime_error("cannot start " + argv[0]);
+  }
+  ~Child() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
+  void signal(int number) { ::kill(pid_, number); }
+  // Waits for the exit and returns its status code (-1 on timeout).
+  int wait(std::chrono::seconds timeout) {
+    const auto end = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < end) {
+      int status = 0;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      std::this_thread::sleep_for(50ms);
+    }
+    return -1;
+  }
+  bool running() {
+    int status = 0;
+    return pid_ > 0 && ::waitpid(pid_, &status, WNOHANG) == 0;
+  }
+
+ private:
+  pid_t pid_ = -1;
+};
+
+std::string slurp(const fs::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// What the test sees on the wire.
+struct Observed {
+  std::mutex mutex;
+  std::map<std::uint32_t, std::vector<std::uint64_t>> chunk_versions;  // per actor, in order
+  std::uint64_t newest_snapshot = 0;
+  std::uint64_t snapshot_bytes = 0;
+
+  std::uint64_t min_newest_chunk_version() {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (chunk_versions.size() < 2) return 0;
+    std::uint64_t low = UINT64_MAX;
+    for (auto& [actor, versions] : chunk_versions) low = std::min(low, versions.back());
+    return low;
+  }
+};
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    domain_ = testing::unique_domain_id();
+    run_dir_ = dir_.path() / "runs" / "itest";
+    config_ = dir_.path() / "itest.yaml";
+    std::ofstream(config_) << R"(preset: tiny
+run:
+  seed: 3
+env:
+  densities: [0]
+  time_limit_steps: 150
+actor:
+  chunk_length: 16
+  request_after_s: 1
+agent:
+  replay:
+    prefill: 128
+    capacity: 20000
+learner:
+  replay_ratio: 32
+  snapshot_every: 2
+  log_interval_s: 1
+  announce_s: 0.5
+)";
+  }
+
+  std::vector<std::string> args(const std::string& program) const {
+    return {std::string(INDRIVE_BIN_DIR) + "/" + program,
+            "--config",
+            config_.string(),
+            "--run-dir",
+            run_dir_.string(),
+            "--domain",
+            std::to_string(domain_),
+            "--dds-profile",
+            testing::source_path("deploy/dds/single_host.xml").string()};
+  }
+
+  std::unique_ptr<Child> start_learner() {
+    return std::make_unique<Child>(args("indrive-learner"), dir_.path() / "learner.log");
+  }
+  std::unique_ptr<Child> start_actor(int id) {
+    auto argv = args("indrive-actor");
+    argv.insert(argv.end(), {"--id", std::to_string(id)});
+    return std::make_unique<Child>(argv, dir_.path() / ("actor-" + std::to_string(id) + ".log"));
+  }
+
+  std::string logs() {
+    std::string text;
+    for (const auto& name : {"learner.log", "actor-0.log", "actor-1.log"}) {
+      text += std::string("----- ") + name + "\n" + slurp(dir_.path() / name);
+    }
+    return text;
+  }
+
+  nlohmann::json last_metrics() {
+    std::ifstream in(run_dir_ / "metrics.jsonl");
+    std::string line, last;
+    while (std::getline(in, line)) {
+      if (!line.empty()) last = line;
+    }
+    return last.empty() ? nlohmann::json{} : nlohmann::json::parse(last);
+  }
+
+  testing::TempDir dir_{"indrive-service"};
+  int domain_ = 0;
+  fs::path run_dir_;
+  fs::path config_;
+};
+
+TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
+  dds::Participant participant(
+      {.domain_id = domain_,
+       .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()});
+  Observed seen;
+  auto chunk_reader =
+      participant.make_reader<msg::TrajectoryChunk>([&](const msg::TrajectoryChunk& chunk) {
+        if (chunk.actor_id() > 1) return;  // the test's own injected chunks
+        std::lock_guard<std::mutex> lock(seen.mutex);
+        seen.chunk_versions[chunk.actor_id()].push_back(chunk.policy_version());
+      });
+  auto snapshot_reader =
+      participant.make_reader<msg::PolicySnapshot>([&](const msg::PolicySnapshot& snapshot) {
+        std::lock_guard<std::mutex> lock(seen.mutex);
+        seen.newest_snapshot = std::max(seen.newest_snapshot, snapshot.version());
+        seen.snapshot_bytes = snapshot.params().size();
+      });
+  auto chunk_writer = participant.make_writer<msg::TrajectoryChunk>();
+
+  auto learner = start_learner();
+  auto actor0 = start_actor(0);
+  auto actor1 = start_actor(1);
+
+  // Both actors must act with a snapshot of version >= 2 (they start with the random policy,
+  // version 0) and the learner must have published at least version 3.
+  const auto deadline = std::chrono::steady_clock::now() + 100s;
+  while (std::chrono::steady_clock::now() < deadline && seen.min_newest_chunk_version() < 2) {
+    ASSERT_TRUE(learner->running()) << logs();
+    ASSERT_TRUE(actor0->running()) << logs();
+    ASSERT_TRUE(actor1->running()) << logs();
+    std::this_thread::sleep_for(200ms);
+  }
+  ASSERT_GE(seen.min_newest_chunk_version(), 2u) << logs();
+  {
+    std::lock_guard<std::mutex> lock(seen.mutex);
+    EXPECT_GE(seen.newest_snapshot, 2u);
+    EXPECT_GT(seen.snapshot_bytes, 0u);
+    for (auto& [actor, versions] : seen.chunk_versions) {
+      EXPECT_TRUE(std::is_sorted(versions.begin(), versions.end()))
+          << "actor " << actor << " never goes back to an older snapshot";
+    }
+  }
+
+  // Each actor started with the random policy and switched to a snapshot (the test's reader
+  // may match after the first chunks, so this is read from the actors' logs).
+  for (const auto& name : {"actor-0.log", "actor-1.log"}) {
+    EXPECT_NE(slurp(dir_.path() / name).find("acting with snapshot v"), std::string::npos) << name;
+  }
+
+  // A chunk of another run and a chunk with a bad checksum: dropped, counted, no crash.
+  actor::ChunkBuilder builder(
+      {.run_id = "another-run", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
+  std::vector<std::uint8_t> frame(32 * 32, 1);
+  builder.add({.frame = frame, .is_first = true, .episode_step = 0});
+  builder.add({.frame = frame, .episode_step = 1});
+  ASSERT_TRUE(chunk_writer->write(builder.take()));
+  actor::ChunkBuilder ours(
+      {.run_id = "itest", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
+  ours.add({.frame = frame, .is_first = true, .episode_step = 0});
+  ours.add({.frame = frame, .episode_step = 1});
+  auto corrupt = ours.take();
+  corrupt.checksum(corrupt.checksum() ^ 1u);
+  ASSERT_TRUE(chunk_writer->write(corrupt));
+  chunk_writer->wait_for_acknowledgments(5000ms);
+  std::this_thread::sleep_for(1500ms);  // one metrics interval
+  EXPECT_TRUE(learner->running()) << logs();
+
+  // SIGTERM: the learner checkpoints and exits cleanly.
+  learner->signal(SIGTERM);
+  ASSERT_EQ(learner->wait(60s), 0) << logs();
+  const auto metrics = last_metrics();
+  ASSERT_FALSE(metrics.empty()) << "metrics.jsonl must have lines";
+  EXPECT_EQ(metrics.value("dropped_wrong_run", 0), 1) << metrics.dump();
+  EXPECT_EQ(metrics.value("dropped_bad_checksum", 0), 1) << metrics.dump();
+  EXPECT_GT(metrics.value("updates", 0), 0);
+  EXPECT_GT(metrics.value("env_steps", 0), 128);
+  EXPECT_TRUE(fs::exists(run_dir_ / "config.yaml"));
+  ASSERT_FALSE(fs::is_empty(run_dir_ / "checkpoints"));
+  const std::uint64_t version_before = metrics.value("policy_version", 0);
+  const std::int64_t steps_before = metrics.value("env_steps", 0);
+
+  // The actors keep their snapshot and wait; a restarted learner resumes from its checkpoint
+  // and the version sequence and step counters continue.
+  std::this_thread::sleep_for(1s);
+  EXPECT_TRUE(actor0->running() && actor1->running()) << logs();
+  learner = start_learner();
+  const auto resume_deadline = std::chrono::steady_clock::now() + 60s;
+  while (std::chrono::steady_clock::now() < resume_deadline &&
+         seen.min_newest_chunk_version() <= version_before) {
+    ASSERT_TRUE(learner->running()) << logs();
+    std::this_thread::sleep_for(200ms);
+  }
+  EXPECT_GT(seen.min_newest_chunk_version(), version_before) << logs();
+  learner->signal(SIGTERM);
+  ASSERT_EQ(learner->wait(60s), 0) << logs();
+  const auto resumed = last_metrics();
+  EXPECT_GT(resumed.value("env_steps", 0), steps_before);
+  EXPECT_EQ(resumed.value("learner_epoch", 0), 2);
+  actor0->signal(SIGTERM);
+  actor1->signal(SIGTERM);
+  EXPECT_EQ(actor0->wait(30s), 0) << logs();
+  EXPECT_EQ(actor1->wait(30s), 0) << logs();
+}
+
+}  // namespace
+}  // namespace indrive
