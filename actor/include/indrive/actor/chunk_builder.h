@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "trajectory.h"
+#include "indrive/msg/trajectory.h"
 
 namespace indrive::actor {
 

@@ -18,7 +18,7 @@
 #include "indrive/common/agent/config.h"
 #include "indrive/common/config.h"
 #include "indrive/envserver/env.h"
-#include "trajectory.h"
+#include "indrive/msg/trajectory.h"
 
 namespace indrive::actor {
 
