@@ -91,7 +91,11 @@ cv::Mat LinePlot::render(int width, int height) const {
       y_max = std::max(y_max, s.y[i]);
     }
   }
-  cv::putText(image, title_, {left, 25}, font, 0.6, {0, 0, 0}, 1, cv::LINE_AA);
+  // Title centred over the axes, clear of the y-axis label in the top-left corner.
+  int baseline = 0;
+  const cv::Size title_size = cv::getTextSize(title_, font, 0.6, 1, &baseline);
+  cv::putText(image, title_, {area.x + (area.width - title_size.width) / 2, 25}, font, 0.6,
+              {0, 0, 0}, 1, cv::LINE_AA);
   if (!std::isfinite(x_min)) {
     cv::putText(image, "no data", {area.x + area.width / 2 - 30, area.y + area.height / 2}, font,
                 0.6, {80, 80, 80}, 1, cv::LINE_AA);
