@@ -42,6 +42,17 @@ std::string title_of(const TableKey& key) {
   return key.eval_kind + ": " + key.task;
 }
 
+// The stats of one cell, or nullptr when that method never ran that town and route.
+const CellStats* find_cell(const Table& table, const std::string& method, const std::string& town,
+                           const std::string& route) {
+  const auto m = table.cells.find(method);
+  if (m == table.cells.end()) return nullptr;
+  const auto t = m->second.find(town);
+  if (t == m->second.end()) return nullptr;
+  const auto r = t->second.find(route);
+  return r == t->second.end() ? nullptr : &r->second;
+}
+
 void push_unique(std::vector<std::string>& list, const std::string& value) {
   if (std::find(list.begin(), list.end(), value) == list.end()) list.push_back(value);
 }
@@ -171,13 +182,7 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
       for (const auto& method : table.methods) {
         md << "| " << method << " |";
         for (const auto& route : table.routes) {
-          const auto& by_town = table.cells.at(method);
-          const auto t = by_town.find(town);
-          const CellStats* s = nullptr;
-          if (t != by_town.end()) {
-            const auto r = t->second.find(route);
-            if (r != t->second.end()) s = &r->second;
-          }
+          const CellStats* s = find_cell(table, method, town, route);
           if (s == nullptr) {
             md << " - | - | 0 |";
           } else {
@@ -260,12 +265,9 @@ std::string render_csv(const Report& report) {
     for (const auto& method : table.methods) {
       for (const auto& town : table.towns) {
         for (const auto& route : table.routes) {
-          const auto& by_town = table.cells.at(method);
-          const auto t = by_town.find(town);
-          if (t == by_town.end()) continue;
-          const auto r = t->second.find(route);
-          if (r == t->second.end()) continue;
-          const CellStats& s = r->second;
+          const CellStats* cell = find_cell(table, method, town, route);
+          if (cell == nullptr) continue;
+          const CellStats& s = *cell;
           csv << key.eval_kind << ',' << key.task << ',' << method << ',' << town << ',' << route
               << ',' << s.seeds << ',' << s.episodes << ',' << s.successes << ',' << fixed(s.sr, 3)
               << ',' << fixed(s.fr(), 3) << ',' << fixed(s.ci_low, 3) << ',' << fixed(s.ci_high, 3)
@@ -300,13 +302,7 @@ std::string render_latex(const Report& report) {
       for (const auto& method : table.methods) {
         tex << escape(method);
         for (const auto& route : table.routes) {
-          const auto& by_town = table.cells.at(method);
-          const auto t = by_town.find(town);
-          const CellStats* s = nullptr;
-          if (t != by_town.end()) {
-            const auto r = t->second.find(route);
-            if (r != t->second.end()) s = &r->second;
-          }
+          const CellStats* s = find_cell(table, method, town, route);
           if (s == nullptr) {
             tex << " & -- & --";
           } else {
