@@ -1,0 +1,204 @@
+// The evaluator end to end, without a learner: a small protocol grid (2 routes x 1 density x
+// 2 episodes on both built-in towns) driven by the oracle, every CSV row checked against an
+// independent replay of its episode, and the report's cells recomputed by hand from the rows.
+// Also: a snapshot file evaluated without DDS, and the evaluator's bad inputs.
+#include "indrive/actor/evaluator.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+
+#include "indrive/actor/eval_policy.h"
+#include "indrive/common/agent/agent.h"
+#include "indrive/common/episode_csv.h"
+#include "indrive/deploy/report.h"
+#include "indrive/envserver/env.h"
+#include "testing.h"
+
+namespace indrive::actor {
+namespace {
+
+ServiceConfig resolve(const std::filesystem::path& run_dir, std::vector<std::string> overrides) {
+  overrides.insert(overrides.begin(), "preset=tiny");
+  return ServiceConfig::resolve({.run_dir = run_dir, .overrides = overrides});
+}
+
+// What the test's own replay of one episode gives.
+struct Replay {
+  std::uint32_t events = 0;
+  int steps = 0;
+  double progress_m = 0.0;
+  double length_m = 0.0;
+};
+
+// Replays an episode with its own env and loop: same seeds, same budget rule, oracle actions.
+Replay replay(env::Env& env, const EpisodeSpec& spec) {
+  env::StepResult step = env.reset({.town = spec.town,
+                                    .route = spec.route,
+                                    .density = spec.density,
+                                    .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
+                                    .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
+  auto oracle = make_oracle_policy({});
+  oracle->begin(env, spec);
+  const int budget = route_step_budget(env.route()->length_m());
+  while (!step.is_last && step.step < budget) step = env.step(oracle->act(env, step));
+  Replay out{step.events, step.step, step.route_progress_m, env.route()->length_m()};
+  if (!step.is_last) out.events |= env::kTimeLimit;
+  return out;
+}
+
+TEST(Evaluator, OracleGridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
+  testing::TempDir dir;
+  const auto config =
+      resolve(dir.path() / "oracle-s0",
+              {"eval.policy=oracle", "eval.towns=town01,town02", "eval.routes=straight,right_loop",
+               "eval.densities=[10]", "eval.episodes_per_cell=2", "run.seed=4"});
+  Evaluator evaluator(config, 0, 1);
+  const std::atomic<bool> stop{false};
+  ASSERT_EQ(evaluator.run(stop), 0);
+
+  const auto rows = read_episode_csv(evaluator.results_file());
+  const ProtocolGrid grid{.towns = {"town01", "town02"},
+                          .routes = {"straight", "right_loop"},
+                          .densities = {10},
+                          .episodes_per_cell = 2};
+  const auto specs = grid.all_episodes();
+  ASSERT_EQ(rows.size(), specs.size());
+  ASSERT_EQ(rows.size(), 8u);
+
+  env::EnvConfig env_config = config.env();
+  env_config.events.time_limit_steps = 1 << 30;
+  env::Env env(env_config);
+  std::map<std::pair<std::string, std::string>, std::pair<int, int>> by_hand;  // {n, successes}
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const EpisodeRecord& row = rows[i];
+    const EpisodeSpec& spec = specs[i];
+    SCOPED_TRACE(spec.town + "/" + spec.route + " episode " + std::to_string(spec.episode));
+    EXPECT_EQ(row.run_id, "oracle-s0");
+    EXPECT_EQ(row.method, "oracle");
+    EXPECT_EQ(row.eval_kind, "zero_shot");
+    EXPECT_EQ(row.task, "exploration");
+    EXPECT_EQ(row.train_seed, 4);
+    EXPECT_EQ(row.town, spec.town);
+    EXPECT_EQ(row.route, spec.route);
+    EXPECT_EQ(row.density, 10);
+    EXPECT_EQ(row.episode, spec.episode);
+    EXPECT_EQ(row.traffic_seed, kTrafficSeeds[spec.episode % 3]);
+    EXPECT_EQ(row.spawn_seed, kSpawnSeeds[spec.episode % 5]);
+    // The two episodes of a cell meet different traffic.
+    if (spec.episode == 1) EXPECT_NE(row.traffic_seed, rows[i - 1].traffic_seed);
+
+    // The episode replayed independently ends the same way.
+    const Replay r = replay(env, spec);
+    const std::uint32_t failures = r.events & env::kFailureEvents;
+    const bool success = (r.events & env::kDestination) != 0 && failures == 0;
+    EXPECT_EQ(row.success, success);
+    EXPECT_EQ(row.failure_reason, success ? "" : env::event_names(failures));
+    EXPECT_EQ(row.steps, r.steps);
+    EXPECT_NEAR(row.route_completion, std::min(1.0, r.progress_m / r.length_m), 1e-6);
+    EXPECT_LE(row.steps, route_step_budget(r.length_m));
+    if (row.success) EXPECT_GT(row.route_completion, 0.95);
+    EXPECT_EQ(row.episode_return, 0.0);  // no reward in zero-shot evaluation
+
+    auto& cell = by_hand[{row.town, row.route}];
+    ++cell.first;
+    cell.second += row.success ? 1 : 0;
+  }
+
+  // The report's cells, from the same rows: one seed and one density, so SR = successes / n.
+  const deploy::Report report = deploy::aggregate(rows);
+  const deploy::Table& table = report.tables.at({"zero_shot", "exploration"});
+  EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "right_loop"}));
+  const std::string csv = deploy::render_csv(report);
+  const std::string md = deploy::render_markdown(report, "town01", "town02");
+  std::map<std::string, double> town_sum;
+  for (const auto& [key, counts] : by_hand) {
+    const auto& [town, route] = key;
+    const deploy::CellStats& cell = table.cells.at("oracle").at(town).at(route);
+    const double sr = 100.0 * counts.second / counts.first;
+    EXPECT_EQ(cell.episodes, 2);
+    EXPECT_EQ(cell.successes, counts.second);
+    EXPECT_DOUBLE_EQ(cell.sr, sr);
+    town_sum[town] += sr;
+    char line[160];
+    std::snprintf(line, sizeof(line), "zero_shot,exploration,oracle,%s,%s,1,2,%d,%.3f,%.3f,",
+                  town.c_str(), route.c_str(), counts.second, sr, 100.0 - sr);
+    EXPECT_NE(csv.find(line), std::string::npos) << line << "\n" << csv;
+  }
+  // Average over the two routes per town and the town01 - town02 gap.
+  char average[128];
+  std::snprintf(average, sizeof(average), "| oracle | %.1f | %.1f | %.1f |",
+                town_sum["town01"] / 2.0, town_sum["town02"] / 2.0,
+                town_sum["town01"] / 2.0 - town_sum["town02"] / 2.0);
+  EXPECT_NE(md.find(average), std::string::npos) << average << "\n" << md;
+}
+
+TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {
+  testing::TempDir dir;
+  agent::AgentConfig agent_config = agent::preset("tiny");
+  agent::Agent agent(agent_config);
+  const auto file = dir.path() / "snapshot-v7.params";
+  write_snapshot_file(file, agent.snapshot());
+  // No DDS: a learner's snapshot would time out after 1 s and return 2.
+  const auto config =
+      resolve(dir.path() / "disag-s1",
+              {"eval.snapshot_file=" + file.string(), "eval.towns=town02", "eval.routes=straight",
+               "eval.densities=[5]", "eval.episodes_per_cell=2", "eval.snapshot_timeout_s=1",
+               "eval.video_episodes=1"});
+  Evaluator evaluator(config, 0, 1);
+  const std::atomic<bool> stop{false};
+  ASSERT_EQ(evaluator.run(stop), 0);
+  const auto rows = read_episode_csv(evaluator.results_file());
+  ASSERT_EQ(rows.size(), 2u);
+  for (const auto& row : rows) {
+    EXPECT_EQ(row.method, "disag");
+    EXPECT_EQ(row.town, "town02");
+    EXPECT_EQ(row.success, row.failure_reason.empty());
+    EXPECT_GT(row.steps, 0);
+  }
+  // The first episode of the cell was recorded; the second was not.
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "disag-s1/videos/eval-town02-straight-5-0.mp4"));
+  EXPECT_FALSE(
+      std::filesystem::exists(dir.path() / "disag-s1/videos/eval-town02-straight-5-1.mp4"));
+}
+
+// The message of the EvalError constructing an evaluator throws ("" when none).
+std::string setup_error(const ServiceConfig& config) {
+  try {
+    Evaluator evaluator(config, 0, 1);
+  } catch (const EvalError& error) {
+    return error.what();
+  }
+  return "";
+}
+
+TEST(Evaluator, BadInputsAreClearErrorsBeforeAnythingStarts) {
+  testing::TempDir dir;
+  std::string message =
+      setup_error(resolve(dir.path() / "r", {"eval.policy=oracle", "eval.towns=town01,town9"}));
+  EXPECT_NE(message.find("unknown evaluation town 'town9'"), std::string::npos) << message;
+  EXPECT_NE(message.find("town01, town02"), std::string::npos) << message;
+
+  message = setup_error(resolve(dir.path() / "r", {"eval.policy=oracle", "eval.routes=loop"}));
+  EXPECT_NE(message.find("unknown evaluation route 'loop'"), std::string::npos) << message;
+
+  // A pretraining snapshot has no task actor: few-shot evaluation of it is refused.
+  agent::Agent agent(agent::preset("tiny"));
+  const auto file = dir.path() / "pretrain.params";
+  write_snapshot_file(file, agent.snapshot());
+  message = setup_error(
+      resolve(dir.path() / "r", {"eval.snapshot_file=" + file.string(), "eval.kind=few_shot"}));
+  EXPECT_NE(message.find(file.string()), std::string::npos) << message;
+  EXPECT_NE(message.find("not task_actor"), std::string::npos) << message;
+
+  message = setup_error(resolve(
+      dir.path() / "r", {"eval.snapshot_file=" + (dir.path() / "missing.params").string()}));
+  EXPECT_NE(message.find("missing.params does not exist"), std::string::npos) << message;
+
+  message = setup_error(resolve(dir.path() / "r", {"eval.policy=oracle", "eval.continuous=true"}));
+  EXPECT_NE(message.find("--continuous"), std::string::npos) << message;
+}
+
+}  // namespace
+}  // namespace indrive::actor
