@@ -11,6 +11,7 @@
 
 #include "indrive/actor/eval_policy.h"
 #include "indrive/actor/snapshot_inbox.h"
+#include "indrive/common/check.h"
 #include "indrive/common/dds.h"
 #include "indrive/common/episode_csv.h"
 #include "indrive/common/log.h"

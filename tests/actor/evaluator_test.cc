@@ -32,51 +32,66 @@ struct Replay {
   double length_m = 0.0;
 };
 
-// Replays an episode with its own env and loop: same seeds, same budget rule, oracle actions.
-Replay replay(env::Env& env, const EpisodeSpec& spec) {
+// Replays an episode with its own env and loop: same seeds, same budget rule, same policy.
+Replay replay(env::Env& env, const EpisodeSpec& spec, EpisodePolicy& policy) {
   env::StepResult step = env.reset({.town = spec.town,
                                     .route = spec.route,
                                     .density = spec.density,
                                     .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
                                     .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
-  auto oracle = make_oracle_policy({});
-  oracle->begin(env, spec);
+  policy.begin(env, spec);
   const int budget = route_step_budget(env.route()->length_m());
-  while (!step.is_last && step.step < budget) step = env.step(oracle->act(env, step));
+  while (!step.is_last && step.step < budget) step = env.step(policy.act(env, step));
   Replay out{step.events, step.step, step.route_progress_m, env.route()->length_m()};
   if (!step.is_last) out.events |= env::kTimeLimit;
   return out;
 }
 
-TEST(Evaluator, OracleGridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
-  testing::TempDir dir;
-  const auto config =
-      resolve(dir.path() / "oracle-s0",
-              {"eval.policy=oracle", "eval.towns=town01,town02", "eval.routes=straight,right_loop",
-               "eval.densities=[10]", "eval.episodes_per_cell=2", "run.seed=4"});
+// Runs one evaluator (scoped: libsumo holds one simulation per process) and returns its rows.
+std::vector<EpisodeRecord> evaluate(const ServiceConfig& config) {
   Evaluator evaluator(config, 0, 1);
   const std::atomic<bool> stop{false};
-  ASSERT_EQ(evaluator.run(stop), 0);
+  EXPECT_EQ(evaluator.run(stop), 0);
+  return read_episode_csv(evaluator.results_file());
+}
 
-  const auto rows = read_episode_csv(evaluator.results_file());
+TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
+  testing::TempDir dir;
+  const std::vector<std::string> grid_keys = {
+      "eval.towns=town01,town02", "eval.routes=straight,right_loop", "eval.densities=[10]",
+      "eval.episodes_per_cell=2", "run.seed=4"};
+  auto with = [&](std::vector<std::string> keys) {
+    keys.insert(keys.end(), grid_keys.begin(), grid_keys.end());
+    return keys;
+  };
+  const auto oracle_config = resolve(dir.path() / "oracle-s4", with({"eval.policy=oracle"}));
+  const auto random_config = resolve(dir.path() / "random-s4", with({"eval.policy=random"}));
+  std::vector<EpisodeRecord> rows = evaluate(oracle_config);
+  const std::vector<EpisodeRecord> random_rows = evaluate(random_config);
+  ASSERT_EQ(rows.size(), 8u);
+  ASSERT_EQ(random_rows.size(), 8u);
+  rows.insert(rows.end(), random_rows.begin(), random_rows.end());
+
   const ProtocolGrid grid{.towns = {"town01", "town02"},
                           .routes = {"straight", "right_loop"},
                           .densities = {10},
                           .episodes_per_cell = 2};
   const auto specs = grid.all_episodes();
-  ASSERT_EQ(rows.size(), specs.size());
-  ASSERT_EQ(rows.size(), 8u);
-
-  env::EnvConfig env_config = config.env();
+  env::EnvConfig env_config = oracle_config.env();
   env_config.events.time_limit_steps = 1 << 30;
   env::Env env(env_config);
-  std::map<std::pair<std::string, std::string>, std::pair<int, int>> by_hand;  // {n, successes}
+  auto oracle = make_oracle_policy({});
+  auto random = make_random_policy(4);  // run.seed
+  // [method][{town, route}] -> {episodes, successes}, counted by hand from the rows.
+  std::map<std::string, std::map<std::pair<std::string, std::string>, std::pair<int, int>>> by_hand;
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const EpisodeRecord& row = rows[i];
-    const EpisodeSpec& spec = specs[i];
-    SCOPED_TRACE(spec.town + "/" + spec.route + " episode " + std::to_string(spec.episode));
-    EXPECT_EQ(row.run_id, "oracle-s0");
-    EXPECT_EQ(row.method, "oracle");
+    const EpisodeSpec& spec = specs[i % specs.size()];
+    const bool is_oracle = i < specs.size();
+    SCOPED_TRACE(row.method + " " + spec.town + "/" + spec.route + " episode " +
+                 std::to_string(spec.episode));
+    EXPECT_EQ(row.run_id, is_oracle ? "oracle-s4" : "random-s4");
+    EXPECT_EQ(row.method, is_oracle ? "oracle" : "random");
     EXPECT_EQ(row.eval_kind, "zero_shot");
     EXPECT_EQ(row.task, "exploration");
     EXPECT_EQ(row.train_seed, 4);
@@ -90,7 +105,7 @@ TEST(Evaluator, OracleGridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
     if (spec.episode == 1) EXPECT_NE(row.traffic_seed, rows[i - 1].traffic_seed);
 
     // The episode replayed independently ends the same way.
-    const Replay r = replay(env, spec);
+    const Replay r = replay(env, spec, is_oracle ? *oracle : *random);
     const std::uint32_t failures = r.events & env::kFailureEvents;
     const bool success = (r.events & env::kDestination) != 0 && failures == 0;
     EXPECT_EQ(row.success, success);
@@ -101,37 +116,51 @@ TEST(Evaluator, OracleGridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
     if (row.success) EXPECT_GT(row.route_completion, 0.95);
     EXPECT_EQ(row.episode_return, 0.0);  // no reward in zero-shot evaluation
 
-    auto& cell = by_hand[{row.town, row.route}];
+    auto& cell = by_hand[row.method][{row.town, row.route}];
     ++cell.first;
     cell.second += row.success ? 1 : 0;
   }
+  // The bounds the grid exists to show: the oracle drives these routes, random actions do not.
+  for (const auto& [key, counts] : by_hand["oracle"]) EXPECT_EQ(counts.second, 2) << key.first;
+  for (const auto& [key, counts] : by_hand["random"]) EXPECT_EQ(counts.second, 0) << key.first;
 
   // The report's cells, from the same rows: one seed and one density, so SR = successes / n.
   const deploy::Report report = deploy::aggregate(rows);
   const deploy::Table& table = report.tables.at({"zero_shot", "exploration"});
   EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "right_loop"}));
+  EXPECT_EQ(table.methods, (std::vector<std::string>{"oracle", "random"}));
   const std::string csv = deploy::render_csv(report);
   const std::string md = deploy::render_markdown(report, "town01", "town02");
-  std::map<std::string, double> town_sum;
-  for (const auto& [key, counts] : by_hand) {
-    const auto& [town, route] = key;
-    const deploy::CellStats& cell = table.cells.at("oracle").at(town).at(route);
-    const double sr = 100.0 * counts.second / counts.first;
-    EXPECT_EQ(cell.episodes, 2);
-    EXPECT_EQ(cell.successes, counts.second);
-    EXPECT_DOUBLE_EQ(cell.sr, sr);
-    town_sum[town] += sr;
-    char line[160];
-    std::snprintf(line, sizeof(line), "zero_shot,exploration,oracle,%s,%s,1,2,%d,%.3f,%.3f,",
-                  town.c_str(), route.c_str(), counts.second, sr, 100.0 - sr);
-    EXPECT_NE(csv.find(line), std::string::npos) << line << "\n" << csv;
+  for (const auto& [method, cells] : by_hand) {
+    std::map<std::string, double> town_sum;
+    for (const auto& [key, counts] : cells) {
+      const auto& [town, route] = key;
+      const deploy::CellStats& cell = table.cells.at(method).at(town).at(route);
+      const double sr = 100.0 * counts.second / counts.first;
+      EXPECT_EQ(cell.episodes, 2);
+      EXPECT_EQ(cell.successes, counts.second);
+      EXPECT_DOUBLE_EQ(cell.sr, sr);
+      town_sum[town] += sr;
+      char line[160];
+      std::snprintf(line, sizeof(line), "zero_shot,exploration,%s,%s,%s,1,2,%d,%.3f,%.3f,",
+                    method.c_str(), town.c_str(), route.c_str(), counts.second, sr, 100.0 - sr);
+      EXPECT_NE(csv.find(line), std::string::npos) << line << "\n" << csv;
+    }
+    // Average over the two routes per town and the town01 - town02 gap.
+    char average[128];
+    std::snprintf(average, sizeof(average), "| %s | %.1f | %.1f | %.1f |", method.c_str(),
+                  town_sum["town01"] / 2.0, town_sum["town02"] / 2.0,
+                  town_sum["town01"] / 2.0 - town_sum["town02"] / 2.0);
+    EXPECT_NE(md.find(average), std::string::npos) << average << "\n" << md;
   }
-  // Average over the two routes per town and the town01 - town02 gap.
-  char average[128];
-  std::snprintf(average, sizeof(average), "| oracle | %.1f | %.1f | %.1f |",
-                town_sum["town01"] / 2.0, town_sum["town02"] / 2.0,
-                town_sum["town01"] / 2.0 - town_sum["town02"] / 2.0);
-  EXPECT_NE(md.find(average), std::string::npos) << average << "\n" << md;
+  // Random episodes fail, and their reasons are counted per route.
+  int random_failures = 0;
+  for (const auto& [town, routes] : table.failures.at("random")) {
+    for (const auto& [route, reasons] : routes) {
+      for (const auto& [reason, n] : reasons) random_failures += n;
+    }
+  }
+  EXPECT_EQ(random_failures, 8);
 }
 
 TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {
