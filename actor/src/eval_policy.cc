@@ -11,6 +11,7 @@
 #include "indrive/common/check.h"
 #include "indrive/common/checksum.h"
 #include "indrive/common/run_dir.h"
+#include "indrive/envserver/events.h"
 #include "indrive/envserver/follower.h"
 #include "indrive/envserver/town.h"
 
@@ -89,6 +90,7 @@ class OraclePolicy final : public EpisodePolicy {
                       env::FollowerConfig{.target_speed_mps = options_.target_speed_mps});
     follower_->reset();
     s_m_ = 0.0;
+    previous_.clear();
   }
   int act(const env::Env& env, const env::StepResult& result) override {
     const int action = follower_->act(result.ego);
@@ -96,18 +98,42 @@ class OraclePolicy final : public EpisodePolicy {
     const env::Route& route = *env.route();
     const Eigen::Vector2d position(result.ego.pose.x_m, result.ego.pose.y_m);
     s_m_ = route.project(position, s_m_, 20.0).s_m;
+    const auto& others = env.traffic_boxes();
+    estimate_velocities(others, env.config().ego.dt_s);
     const double ahead_m = options_.min_gap_m + options_.headway_s * result.ego.speed_mps;
-    if (!leader_ahead(route, s_m_, env.traffic_boxes(), ahead_m, options_.corridor_m)) {
-      return action;
-    }
+    const bool yield = leader_ahead(route, s_m_, others, ahead_m, options_.corridor_m) ||
+                       conflict_ahead(route, env.ego_box(), s_m_, result.ego.speed_mps, others,
+                                      velocities_, options_);
+    previous_.assign(others.begin(), others.end());
+    if (!yield) return action;
     // Keep the follower's steering, drop the throttle: coasting is the only brake there is.
     return env::encode_action(action / 3, 0);
   }
 
  private:
+  // Velocity of each box from the nearest box of the previous step (boxes carry no ids; at
+  // most 8.3 m/s, a car moves under 1 m per step, so the nearest within 2 m is the same car).
+  void estimate_velocities(std::span<const env::Box> others, double dt_s) {
+    velocities_.assign(others.size(), Eigen::Vector2d::Zero());
+    for (std::size_t i = 0; i < others.size(); ++i) {
+      const Eigen::Vector2d now(others[i].pose.x_m, others[i].pose.y_m);
+      double best = 2.0;
+      for (const env::Box& before : previous_) {
+        const Eigen::Vector2d then(before.pose.x_m, before.pose.y_m);
+        const double distance = (now - then).norm();
+        if (distance < best) {
+          best = distance;
+          velocities_[i] = (now - then) / dt_s;
+        }
+      }
+    }
+  }
+
   OracleOptions options_;
   std::optional<env::WaypointFollower> follower_;
   double s_m_ = 0.0;
+  std::vector<env::Box> previous_;
+  std::vector<Eigen::Vector2d> velocities_;
 };
 
 class RandomPolicy final : public EpisodePolicy {
@@ -307,6 +333,37 @@ bool leader_ahead(const env::Route& route, double ego_s_m, std::span<const env::
       if (ds > 0.5 * route.length_m()) ds -= route.length_m();
     }
     if (ds > 0.0 && ds <= ahead_m && std::abs(at.lateral_m) <= corridor_m) return true;
+  }
+  return false;
+}
+
+bool conflict_ahead(const env::Route& route, const env::Box& ego, double ego_s_m,
+                    double ego_speed_mps, std::span<const env::Box> others,
+                    std::span<const Eigen::Vector2d> velocities, const OracleOptions& options) {
+  INDRIVE_CHECK_EQ(others.size(), velocities.size());
+  const double cos_yaw = std::cos(ego.pose.yaw_rad);
+  const double sin_yaw = std::sin(ego.pose.yaw_rad);
+  const double speed = std::max(ego_speed_mps, options.min_plan_speed_mps);
+  constexpr double kSampleS = 0.2;
+  for (std::size_t i = 0; i < others.size(); ++i) {
+    const env::Box& other = others[i];
+    // Behind the ego (in its frame): the other car's business, coasting would not help.
+    const double forward =
+        cos_yaw * (other.pose.x_m - ego.pose.x_m) + sin_yaw * (other.pose.y_m - ego.pose.y_m);
+    if (forward < 0.0) continue;
+    // Standing cars are the leader test's business; predicting them here only blocks the ego
+    // beside cars that wait at a junction for it.
+    if (velocities[i].norm() < 0.5) continue;
+    for (double t = 0.0; t <= options.horizon_s + 1e-9; t += kSampleS) {
+      env::Box ego_then = ego;
+      ego_then.pose = route.pose_at(ego_s_m + speed * t);
+      ego_then.length_m += 2.0 * options.clearance_m;
+      ego_then.width_m += 2.0 * options.clearance_m;
+      env::Box other_then = other;
+      other_then.pose.x_m += velocities[i].x() * t;
+      other_then.pose.y_m += velocities[i].y() * t;
+      if (env::boxes_overlap(ego_then, other_then)) return true;
+    }
   }
   return false;
 }

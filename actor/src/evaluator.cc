@@ -90,7 +90,9 @@ class EpisodeVideo {
     lines.emplace_back(line);
     cv::Mat frame = env::compose_frame(camera, bev, lines, 384);
     if (events != 0) {
-      env::draw_banner(frame, env::event_names(events),
+      // Over the camera half only, so the bird's-eye view stays whole.
+      cv::Mat camera_part = frame(cv::Rect(0, 0, std::min(frame.cols, frame.rows), frame.rows));
+      env::draw_banner(camera_part, env::event_names(events),
                        env::is_failure(events) ? cv::Scalar(200, 30, 30) : cv::Scalar(30, 150, 60));
     }
     if (!writer_) writer_ = std::make_unique<env::VideoWriter>(path_, frame.size(), 10.0);
@@ -101,7 +103,10 @@ class EpisodeVideo {
   // Ends the video, holding the last frame (and the budget-ran-out band) for a moment.
   void finish(std::uint32_t final_events, bool budget_ran_out) {
     if (!writer_) return;
-    if (budget_ran_out) env::draw_banner(last_, env::event_names(final_events));
+    if (budget_ran_out) {
+      cv::Mat camera_part = last_(cv::Rect(0, 0, std::min(last_.cols, last_.rows), last_.rows));
+      env::draw_banner(camera_part, env::event_names(final_events));
+    }
     for (int i = 0; i < kEventHoldFrames; ++i) writer_->write(last_);
     writer_->close();
   }

@@ -10,7 +10,7 @@ episodes=${EPISODES:-3}
 common=(--evaluate --set eval.towns=town01,town02
         --set eval.routes=straight,right_loop,left_loop,two_turn
         --set "eval.densities=[5, 10, 20]" --set eval.episodes_per_cell="$episodes")
-rm -rf "$runs"
+rm -rf "$runs/oracle" "$runs/oracle_nobrake" "$runs/random"
 "$bin/indrive-actor" "${common[@]}" --policy oracle --run-dir "$runs/oracle" \
     --set eval.video_episodes=1 --log-level warn
 "$bin/indrive-actor" "${common[@]}" --policy oracle --run-dir "$runs/oracle_nobrake" \

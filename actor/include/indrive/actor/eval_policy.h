@@ -99,6 +99,12 @@ struct OracleOptions {
   double headway_s = 2.0;   // margin grows with speed: this many seconds of travel
   double min_gap_m = 10.0;  // centre-to-centre distance that always triggers coasting
   double corridor_m = 2.2;  // a vehicle this close to the route centre line is "on" it
+  // Crossing traffic (a left turn across oncoming cars, a car entering a junction): coast
+  // when the ego's path along the route and another car's straight-line path, both grown by
+  // `clearance_m`, meet within `horizon_s`. Coasting from 5 m/s takes about 5 s and 9 m.
+  double horizon_s = 4.0;
+  double clearance_m = 0.6;
+  double min_plan_speed_mps = 3.0;  // the ego's path assumes at least this speed (it speeds up)
 };
 // The route follower (envserver WaypointFollower) driving the episode's route with the 9
 // discrete actions, optionally coasting behind a leading vehicle.
@@ -107,6 +113,14 @@ std::unique_ptr<EpisodePolicy> make_oracle_policy(const OracleOptions& options);
 // along it and `corridor_m` of its centre line: the oracle's braking test.
 bool leader_ahead(const env::Route& route, double ego_s_m, std::span<const env::Box> others,
                   double ahead_m, double corridor_m);
+
+// True when `ego` (a box of the ego's size) driven along `route` from arc length ego_s_m at
+// max(speed, min_plan_speed_mps) meets one of `others` moving straight at its velocity
+// (velocities[i] in m/s, world frame, one per box) within options.horizon_s, both boxes grown
+// by options.clearance_m. Vehicles behind the ego are left out: they must mind the ego.
+bool conflict_ahead(const env::Route& route, const env::Box& ego, double ego_s_m,
+                    double ego_speed_mps, std::span<const env::Box> others,
+                    std::span<const Eigen::Vector2d> velocities, const OracleOptions& options);
 
 // Uniform actions; the episode's policy seed (with `seed`) makes each episode reproducible.
 std::unique_ptr<EpisodePolicy> make_random_policy(std::uint64_t seed);
