@@ -7,10 +7,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <map>
+#include <thread>
 
 #include "indrive/actor/eval_policy.h"
 #include "indrive/common/agent/agent.h"
+#include "indrive/common/dds.h"
 #include "indrive/common/episode_csv.h"
 #include "indrive/deploy/report.h"
 #include "indrive/envserver/env.h"
@@ -190,6 +193,100 @@ TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {
   EXPECT_TRUE(std::filesystem::exists(dir.path() / "disag-s1/videos/eval-town02-straight-5-0.mp4"));
   EXPECT_FALSE(
       std::filesystem::exists(dir.path() / "disag-s1/videos/eval-town02-straight-5-1.mp4"));
+}
+
+// Lines of a learning-curve file after its header (0 when it does not exist yet).
+std::vector<std::string> curve_rows(const std::filesystem::path& path) {
+  std::vector<std::string> rows;
+  std::ifstream in(path);
+  std::string line;
+  for (bool header = true; std::getline(in, line); header = false) {
+    if (!header) rows.push_back(line);
+  }
+  return rows;
+}
+
+// Continuous mode against a stand-in learner on DDS: snapshots v1..v5 with every_k = 2 give
+// curve rows for v1 (the first), v3 (two on) and v5 (the final one, announced as done); v2 and
+// v4 are skipped. Each row carries its snapshot's version and env steps.
+TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
+  testing::TempDir dir;
+  const int domain = testing::unique_domain_id();
+  const auto config =
+      resolve(dir.path() / "curve-run",
+              {"eval.continuous=true", "eval.every_k=2", "eval.towns=town02",
+               "eval.routes=straight", "eval.densities=[5]", "eval.episodes_per_cell=1",
+               "eval.snapshot_timeout_s=60", "dds.domain_id=" + std::to_string(domain)});
+  agent::AgentConfig agent_config = config.agent();
+  agent::Agent agent(agent_config);
+  dds::Participant learner(
+      dds::ParticipantOptions{.domain_id = domain, .profiles_file = config.dds_profile()});
+  auto snapshots = learner.make_writer<msg::PolicySnapshot>();
+  auto heartbeats = learner.make_writer<msg::Heartbeat>();
+  auto publish = [&](std::uint64_t version) {
+    msg::PolicySnapshot snapshot;
+    snapshot.run_id(config.run_id());
+    snapshot.version(version);
+    snapshot.preset(agent_config.preset);
+    snapshot.architecture(architecture_descriptor(agent_config));
+    snapshot.heads(msg::HEAD_ENCODER | msg::HEAD_RSSM | msg::HEAD_EXPLORATION_ACTOR);
+    snapshot.phase(msg::PHASE_PRETRAIN);
+    snapshot.env_steps(1000 * version);
+    snapshot.params(agent.snapshot());
+    dds::seal(snapshot);
+    snapshots->write(snapshot);
+  };
+  auto beat = [&](bool done, std::uint64_t version) {
+    msg::Heartbeat heartbeat;
+    heartbeat.role(msg::ROLE_LEARNER);
+    heartbeat.run_id(config.run_id());
+    heartbeat.state(done ? "done" : "running");
+    heartbeat.policy_version(version);
+    dds::seal(heartbeat);
+    heartbeats->write(heartbeat);
+  };
+
+  std::atomic<bool> stop{false};
+  std::atomic<int> code{-1};
+  const auto curve = dir.path() / "curve-run" / "eval" / "curve-0.csv";
+  std::thread evaluator_thread([&] {
+    Evaluator evaluator(config, 0, 1);
+    code = evaluator.run(stop);
+  });
+  // Publishes `version` and waits until the curve holds `rows` rows.
+  auto step = [&](std::uint64_t version, std::size_t rows, bool done) {
+    publish(version);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (curve_rows(curve).size() < rows && std::chrono::steady_clock::now() < deadline &&
+           code.load() < 0) {
+      beat(done, version);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  };
+  step(1, 1, false);
+  step(2, 1, false);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // v2 must not be evaluated
+  EXPECT_EQ(curve_rows(curve).size(), 1u);
+  step(3, 2, false);
+  step(4, 2, false);
+  step(5, 3, true);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (code.load() < 0 && std::chrono::steady_clock::now() < deadline) {
+    beat(true, 5);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  stop = true;
+  evaluator_thread.join();
+  EXPECT_EQ(code.load(), 0);
+
+  const auto rows = curve_rows(curve);
+  ASSERT_EQ(rows.size(), 3u);
+  const char* expected[] = {"1000,1,disag,zero_shot,exploration,town02,straight,5,",
+                            "3000,3,disag,zero_shot,exploration,town02,straight,5,",
+                            "5000,5,disag,zero_shot,exploration,town02,straight,5,"};
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(rows[i].rfind(expected[i], 0), 0u) << rows[i];
+  // The report reads results, not curves: this run has none.
+  EXPECT_THROW(deploy::load_results({dir.path() / "curve-run"}), CsvError);
 }
 
 // The message of the EvalError constructing an evaluator throws ("" when none).
