@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "indrive/actor/eval_policy.h"
 #include "indrive/actor/evaluator.h"
 #include "indrive/actor/process_cli.h"
 #include "indrive/actor/training_actor.h"
@@ -38,7 +39,10 @@ int main(int argc, char** argv) {
       throw std::invalid_argument("--policy, --snapshot and --continuous need --evaluate");
     }
     // The flags are shorthands for eval.* keys, applied after any --set.
-    if (!policy.empty()) options.overrides.push_back("eval.policy=" + policy);
+    if (!policy.empty()) {
+      indrive::actor::parse_policy_source(policy);  // names the allowed values for the flag
+      options.overrides.push_back("eval.policy=" + policy);
+    }
     if (!snapshot.empty()) {
       options.overrides.push_back("eval.snapshot_file=" + snapshot);
       if (policy.empty()) options.overrides.push_back("eval.policy=snapshot");

@@ -206,24 +206,18 @@ std::vector<std::string> curve_rows(const std::filesystem::path& path) {
   return rows;
 }
 
-// Continuous mode against a stand-in learner on DDS: snapshots v1..v5 with every_k = 2 give
-// curve rows for v1 (the first), v3 (two on) and v5 (the final one, announced as done); v2 and
-// v4 are skipped. Each row carries its snapshot's version and env steps.
-TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
-  testing::TempDir dir;
-  const int domain = testing::unique_domain_id();
-  const auto config =
-      resolve(dir.path() / "curve-run",
-              {"eval.continuous=true", "eval.every_k=2", "eval.towns=town02",
-               "eval.routes=straight", "eval.densities=[5]", "eval.episodes_per_cell=1",
-               "eval.snapshot_timeout_s=60", "dds.domain_id=" + std::to_string(domain)});
-  agent::AgentConfig agent_config = config.agent();
-  agent::Agent agent(agent_config);
-  dds::Participant learner(
-      dds::ParticipantOptions{.domain_id = domain, .profiles_file = config.dds_profile()});
-  auto snapshots = learner.make_writer<msg::PolicySnapshot>();
-  auto heartbeats = learner.make_writer<msg::Heartbeat>();
-  auto publish = [&](std::uint64_t version) {
+// A stand-in learner on DDS: publishes snapshots of one (untrained) agent and heartbeats.
+struct StandInLearner {
+  StandInLearner(const ServiceConfig& config)
+      : config(config),
+        agent_config(config.agent()),
+        agent(agent_config),
+        participant(dds::ParticipantOptions{.domain_id = config.domain_id(),
+                                            .profiles_file = config.dds_profile()}),
+        snapshots(participant.make_writer<msg::PolicySnapshot>()),
+        heartbeats(participant.make_writer<msg::Heartbeat>()) {}
+
+  void publish(std::uint64_t version) {
     msg::PolicySnapshot snapshot;
     snapshot.run_id(config.run_id());
     snapshot.version(version);
@@ -235,8 +229,8 @@ TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
     snapshot.params(agent.snapshot());
     dds::seal(snapshot);
     snapshots->write(snapshot);
-  };
-  auto beat = [&](bool done, std::uint64_t version) {
+  }
+  void beat(bool done, std::uint64_t version) {
     msg::Heartbeat heartbeat;
     heartbeat.role(msg::ROLE_LEARNER);
     heartbeat.run_id(config.run_id());
@@ -244,7 +238,68 @@ TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
     heartbeat.policy_version(version);
     dds::seal(heartbeat);
     heartbeats->write(heartbeat);
-  };
+  }
+
+  const ServiceConfig& config;
+  agent::AgentConfig agent_config;
+  agent::Agent agent;
+  dds::Participant participant;
+  std::unique_ptr<dds::Writer<msg::PolicySnapshot>> snapshots;
+  std::unique_ptr<dds::Writer<msg::Heartbeat>> heartbeats;
+};
+
+// The default mode over DDS: the evaluator waits for the learner's final snapshot (v2 is
+// published, but only v3 is announced as done), evaluates it, writes rows tagged with its
+// version and keeps it as a snapshot file that evaluates again without DDS.
+TEST(Evaluator, LearnersFinalSnapshotIsEvaluatedAndKeptAsAFile) {
+  testing::TempDir dir;
+  const auto config = resolve(dir.path() / "dds-run",
+                              {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
+                               "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
+                               "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  StandInLearner learner(config);
+  std::atomic<bool> stop{false};
+  std::atomic<int> code{-1};
+  std::thread evaluator_thread([&] {
+    Evaluator evaluator(config, 0, 1);
+    code = evaluator.run(stop);
+  });
+  learner.publish(2);
+  for (int i = 0; i < 10; ++i) {  // 0.5 s of "running": v2 must not be taken
+    learner.beat(false, 2);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  learner.publish(3);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (code.load() < 0 && std::chrono::steady_clock::now() < deadline) {
+    learner.beat(true, 3);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  stop = true;
+  evaluator_thread.join();
+  ASSERT_EQ(code.load(), 0);
+  const auto rows = read_episode_csv(dir.path() / "dds-run/eval/evaluator-0.csv");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].policy_version, 3);
+  EXPECT_EQ(rows[0].method, "disag");
+  const auto kept = dir.path() / "dds-run/eval/snapshot-v3.params";
+  EXPECT_EQ(read_snapshot_file(kept), learner.agent.snapshot());
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "dds-run/eval/snapshot-v2.params"));
+}
+
+// Continuous mode against a stand-in learner: snapshots v1..v5 with every_k = 2 give curve
+// rows for v1 (the first), v3 (two on) and v5 (the final one, announced as done); v2 and v4
+// are skipped. Each row carries its snapshot's version and env steps.
+TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
+  testing::TempDir dir;
+  const auto config = resolve(
+      dir.path() / "curve-run",
+      {"eval.continuous=true", "eval.every_k=2", "eval.towns=town02", "eval.routes=straight",
+       "eval.densities=[5]", "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
+       "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  StandInLearner learner(config);
+  auto publish = [&](std::uint64_t version) { learner.publish(version); };
+  auto beat = [&](bool done, std::uint64_t version) { learner.beat(done, version); };
 
   std::atomic<bool> stop{false};
   std::atomic<int> code{-1};
