@@ -1,5 +1,6 @@
 #include "indrive/actor/evaluator.h"
 
+#include <cctype>
 #include <chrono>
 #include <climits>
 #include <cstdio>
