@@ -2,7 +2,9 @@
 // run. Started by `indrive launch`; see docs/architecture.md, section 2.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <stdexcept>
 
+#include "indrive/actor/eval_policy.h"
 #include "indrive/actor/evaluator.h"
 #include "indrive/actor/process_cli.h"
 #include "indrive/actor/training_actor.h"
@@ -20,11 +22,32 @@ int main(int argc, char** argv) {
   app.add_option("--of", of, "number of evaluators sharing the protocol grid")
       ->check(CLI::Range(1, 1024));
   app.add_flag("--evaluate", evaluate, "run the evaluation protocol instead of training");
+  std::string policy;
+  std::string snapshot;
+  bool continuous = false;
+  app.add_option("--policy", policy, "evaluation policy: snapshot, oracle or random (eval.policy)");
+  app.add_option("--snapshot", snapshot,
+                 "evaluate this snapshot file (eval.snapshot_file) instead of the learner's");
+  app.add_flag("--continuous", continuous,
+               "evaluate every eval.every_k-th new snapshot into a learning curve");
   CLI11_PARSE(app, argc, argv);
 
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     const auto& stop = indrive::actor::install_stop_signals();
+    if (!evaluate && (!policy.empty() || !snapshot.empty() || continuous)) {
+      throw std::invalid_argument("--policy, --snapshot and --continuous need --evaluate");
+    }
+    // The flags are shorthands for eval.* keys, applied after any --set.
+    if (!policy.empty()) {
+      indrive::actor::parse_policy_source(policy);  // names the allowed values for the flag
+      options.overrides.push_back("eval.policy=" + policy);
+    }
+    if (!snapshot.empty()) {
+      options.overrides.push_back("eval.snapshot_file=" + snapshot);
+      if (policy.empty()) options.overrides.push_back("eval.policy=snapshot");
+    }
+    if (continuous) options.overrides.push_back("eval.continuous=true");
     const auto config = indrive::actor::ServiceConfig::resolve(options);
     if (evaluate) {
       indrive::actor::Evaluator evaluator(config, id, of);

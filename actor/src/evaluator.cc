@@ -1,21 +1,33 @@
 #include "indrive/actor/evaluator.h"
 
+#include <cctype>
 #include <chrono>
+#include <climits>
+#include <cstdio>
+#include <fstream>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
 
+#include "indrive/actor/eval_policy.h"
 #include "indrive/actor/snapshot_inbox.h"
-#include "indrive/common/agent/policy.h"
+#include "indrive/common/check.h"
 #include "indrive/common/dds.h"
 #include "indrive/common/episode_csv.h"
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
+#include "indrive/envserver/bev.h"
+#include "indrive/envserver/camera.h"
+#include "indrive/envserver/video.h"
 
 namespace indrive::actor {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Frames a fired event stays on screen after the episode ends (1 s at 10 Hz).
+constexpr int kEventHoldFrames = 10;
 
 std::vector<std::string> split_list(const std::string& text) {
   std::vector<std::string> items;
@@ -29,7 +41,118 @@ std::vector<std::string> split_list(const std::string& text) {
   return items;
 }
 
+// A town spec as a file-name part: a map path keeps only its stem, odd characters become '_'.
+std::string file_part(const std::string& text) {
+  std::string part = std::filesystem::path(text).stem().string();
+  if (part.empty()) part = text;
+  for (char& c : part) {
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-') c = '_';
+  }
+  return part;
+}
+
+// What one finished episode gives.
+struct EpisodeOutcome {
+  std::uint32_t events = 0;  // the last step's events, time_limit added when the budget ran out
+  int steps = 0;
+  double route_completion = 0.0;
+  double episode_return = 0.0;
+};
+
+// Records one episode: camera | bird's-eye view with the route, text lines, and the events in a
+// band while they fire (held for a second at the end, when the episode stops on them).
+class EpisodeVideo {
+ public:
+  EpisodeVideo(const std::filesystem::path& path, const env::Env& env, const EpisodeSpec& spec,
+               int budget)
+      : path_(path), bev_(env::BevConfig{}, env.scene()), spec_(spec), budget_(budget) {
+    if (env.route() != nullptr) {
+      for (const env::Waypoint& w : env.route()->waypoints()) route_.push_back(w.position);
+      route_length_m_ = env.route()->length_m();
+    }
+  }
+
+  void add(const env::Env& env, const env::StepResult& result) {
+    const std::uint32_t events = result.events;
+    const cv::Mat camera = env::colorize(result.observation);
+    const cv::Mat bev = bev_.render(env.ego_box(), env.traffic_boxes(),
+                                    {.route = route_, .alert = env::is_failure(events)});
+    char line[96];
+    std::vector<std::string> lines;
+    lines.push_back(spec_.town + " " + spec_.route + " d" + std::to_string(spec_.density) + " ep" +
+                    std::to_string(spec_.episode));
+    std::snprintf(line, sizeof(line), "step %d / %d", result.step, budget_);
+    lines.emplace_back(line);
+    std::snprintf(line, sizeof(line), "speed %.1f m/s", result.ego.speed_mps);
+    lines.emplace_back(line);
+    const double progress =
+        route_length_m_ > 0.0 ? 100.0 * result.route_progress_m / route_length_m_ : 0.0;
+    std::snprintf(line, sizeof(line), "route %.0f%% (%.0f m)", progress, result.route_progress_m);
+    lines.emplace_back(line);
+    cv::Mat frame = env::compose_frame(camera, bev, lines, 384);
+    if (events != 0) {
+      // Over the camera half only, so the bird's-eye view stays whole.
+      cv::Mat camera_part = frame(cv::Rect(0, 0, std::min(frame.cols, frame.rows), frame.rows));
+      env::draw_banner(camera_part, env::event_names(events),
+                       env::is_failure(events) ? cv::Scalar(200, 30, 30) : cv::Scalar(30, 150, 60));
+    }
+    if (!writer_) writer_ = std::make_unique<env::VideoWriter>(path_, frame.size(), 10.0);
+    writer_->write(frame);
+    last_ = frame;
+  }
+
+  // Ends the video, holding the last frame (and the budget-ran-out band) for a moment.
+  void finish(std::uint32_t final_events, bool budget_ran_out) {
+    if (!writer_) return;
+    if (budget_ran_out) {
+      cv::Mat camera_part = last_(cv::Rect(0, 0, std::min(last_.cols, last_.rows), last_.rows));
+      env::draw_banner(camera_part, env::event_names(final_events));
+    }
+    for (int i = 0; i < kEventHoldFrames; ++i) writer_->write(last_);
+    writer_->close();
+  }
+
+ private:
+  std::filesystem::path path_;
+  env::BirdsEyeView bev_;
+  EpisodeSpec spec_;
+  int budget_;
+  std::vector<Eigen::Vector2d> route_;
+  double route_length_m_ = 0.0;
+  std::unique_ptr<env::VideoWriter> writer_;
+  cv::Mat last_;
+};
+
+// Appends learning-curve rows, writing the header first when the file is new.
+class CurveWriter {
+ public:
+  explicit CurveWriter(const std::filesystem::path& path) {
+    const bool fresh = !std::filesystem::exists(path) || std::filesystem::file_size(path) == 0;
+    out_.open(path, std::ios::app);
+    if (!out_) throw EvalError("cannot append to learning curve " + path.string());
+    if (fresh) out_ << curve_csv_header() << '\n' << std::flush;
+  }
+  void write(std::uint64_t env_steps, const EpisodeRecord& r) {
+    out_ << env_steps << ',' << r.policy_version << ',' << r.method << ',' << r.eval_kind << ','
+         << r.task << ',' << r.town << ',' << r.route << ',' << r.density << ',' << r.traffic_seed
+         << ',' << r.spawn_seed << ',' << r.episode << ',' << (r.success ? 1 : 0) << ','
+         << r.failure_reason << ',' << r.steps << ',' << r.route_completion << ','
+         << r.episode_return << '\n'
+         << std::flush;
+  }
+
+ private:
+  std::ofstream out_;
+};
+
 }  // namespace
+
+const std::string& curve_csv_header() {
+  static const std::string header =
+      "env_steps,policy_version,method,eval_kind,task,town,route,density,traffic_seed,spawn_seed,"
+      "episode,success,failure_reason,steps,route_completion,episode_return";
+  return header;
+}
 
 ProtocolGrid protocol_grid(const config::Config& config) {
   ProtocolGrid grid;
@@ -41,6 +164,7 @@ ProtocolGrid protocol_grid(const config::Config& config) {
   }
   grid.episodes_per_cell = config.get<int>("eval.episodes_per_cell");
   grid.validate();
+  check_grid_names(grid);
   return grid;
 }
 
@@ -50,27 +174,70 @@ struct Evaluator::Impl {
         index(evaluator_index),
         count(evaluator_count),
         agent_config(service.agent()),
-        grid(protocol_grid(service.config())),
-        inbox(service.run_id(), architecture_descriptor(agent_config),
-              service.config().get<double>("actor.request_after_s")),
-        policy(agent_config) {
-    participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
-        .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
-    result_writer = participant->make_writer<msg::EpisodeResult>();
-    request_writer = participant->make_writer<msg::SnapshotRequest>();
-    policy_reader = participant->make_reader<msg::PolicySnapshot>(
-        [this](const msg::PolicySnapshot& snapshot) { inbox.offer(snapshot); });
-    announce_reader = participant->make_reader<msg::SnapshotAnnounce>(
-        [this](const msg::SnapshotAnnounce& announce) { inbox.announce(announce); });
-    heartbeat_reader =
-        participant->make_reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
-          if (heartbeat.role() == msg::ROLE_LEARNER && heartbeat.state() == "done" &&
-              dds::validate(heartbeat, config.run_id()) == dds::DropReason::kOk) {
-            learner_done.store(heartbeat.policy_version());
-          }
-        });
+        grid(protocol_grid(service.config())) {
+    const config::Config& c = service.config();
+    // Inputs first, so a mistake is reported before SUMO or DDS start.
+    source = parse_policy_source(c.get<std::string>("eval.policy"));
+    head = resolve_head(c.get<std::string>("eval.head"), c.get<std::string>("eval.kind"));
+    snapshot_file = c.get<std::string>("eval.snapshot_file");
+    continuous = c.get<bool>("eval.continuous");
+    if (!snapshot_file.empty() && source != PolicySource::kSnapshot) {
+      throw EvalError("eval.snapshot_file (--snapshot) is given but eval.policy is '" +
+                      std::string(to_string(source)) + "'; use --policy snapshot");
+    }
+    if (continuous && (source != PolicySource::kSnapshot || !snapshot_file.empty())) {
+      throw EvalError(
+          "--continuous follows a learner's snapshots over DDS; it cannot be combined with "
+          "--snapshot FILE or with the oracle or random policy");
+    }
+    (void)grid.episodes_for(index, count);  // throws for an index outside the count
+    switch (source) {
+      case PolicySource::kOracle:
+        method = c.get<bool>("eval.oracle_brake") ? "oracle" : "oracle_nobrake";
+        policy = make_oracle_policy({.target_speed_mps = c.get<double>("eval.oracle_speed_mps"),
+                                     .brake_for_leader = c.get<bool>("eval.oracle_brake")});
+        break;
+      case PolicySource::kRandom:
+        method = "random";
+        policy = make_random_policy(agent_config.seed);
+        break;
+      case PolicySource::kSnapshot:
+        method = agent_config.phase == agent::Phase::kDreamer
+                     ? "dreamer"
+                     : std::string(agent::to_string(agent_config.intrinsic.method));
+        if (!snapshot_file.empty()) {
+          const auto blob = read_snapshot_file(snapshot_file);
+          policy = make_snapshot_policy(agent_config, blob, head,
+                                        "snapshot file " + snapshot_file.string());
+        }
+        break;
+    }
+    task = head == PolicyHead::kExploration ? "exploration" : agent_config.task;
+
+    if (source == PolicySource::kSnapshot && snapshot_file.empty()) {
+      inbox =
+          std::make_unique<SnapshotInbox>(service.run_id(), architecture_descriptor(agent_config),
+                                          c.get<double>("actor.request_after_s"));
+      participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
+          .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
+      result_writer = participant->make_writer<msg::EpisodeResult>();
+      request_writer = participant->make_writer<msg::SnapshotRequest>();
+      policy_reader = participant->make_reader<msg::PolicySnapshot>(
+          [this](const msg::PolicySnapshot& snapshot) { inbox->offer(snapshot); });
+      announce_reader = participant->make_reader<msg::SnapshotAnnounce>(
+          [this](const msg::SnapshotAnnounce& announce) { inbox->announce(announce); });
+      heartbeat_reader =
+          participant->make_reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
+            if (heartbeat.role() == msg::ROLE_LEARNER && heartbeat.state() == "done" &&
+                dds::validate(heartbeat, config.run_id()) == dds::DropReason::kOk) {
+              learner_done.store(heartbeat.policy_version());
+            }
+          });
+    }
     env::EnvConfig env_config = service.env();
     env_config.town = grid.towns.front();
+    // The evaluator ends episodes at the route's own budget; the env's limit must not cut first.
+    env_config.events.time_limit_steps = INT_MAX / 2;
     env = std::make_unique<env::Env>(env_config);
   }
 
@@ -83,126 +250,226 @@ struct Evaluator::Impl {
     participant.reset();
   }
 
-  // The snapshot to evaluate: the newest one, or the learner's final one when asked to wait.
-  std::shared_ptr<const msg::PolicySnapshot> wait_for_snapshot(const std::atomic<bool>& stop) {
-    const bool wait_for_done = config.config().get<bool>("eval.wait_for_done");
-    const double timeout_s = config.config().get<double>("eval.snapshot_timeout_s");
+  void request_snapshot() {
+    msg::SnapshotRequest request;
+    request.run_id(config.run_id());
+    request.requester_role(msg::ROLE_EVALUATOR);
+    request.requester_id(static_cast<std::uint32_t>(index));
+    dds::seal(request);
+    request_writer->write(request);
+  }
+
+  // The snapshot to evaluate: newer than `after`, and the learner's final one when asked to
+  // wait for it. nullptr when stopped or timed out.
+  std::shared_ptr<const msg::PolicySnapshot> wait_for_snapshot(const std::atomic<bool>& stop,
+                                                               std::uint64_t after,
+                                                               bool wait_for_done,
+                                                               double timeout_s) {
     const auto start = Clock::now();
     while (!stop.load() &&
            std::chrono::duration<double>(Clock::now() - start).count() < timeout_s) {
-      auto snapshot = inbox.take_newer_than(0);
+      auto snapshot = inbox->take_newer_than(after);
       const std::uint64_t final_version = learner_done.load();
       if (snapshot != nullptr &&
           (!wait_for_done || (final_version > 0 && snapshot->version() >= final_version))) {
         return snapshot;
       }
-      if (inbox.should_request(snapshot ? snapshot->version() : 0, Clock::now())) {
-        msg::SnapshotRequest request;
-        request.run_id(config.run_id());
-        request.requester_role(msg::ROLE_EVALUATOR);
-        request.requester_id(static_cast<std::uint32_t>(index));
-        dds::seal(request);
-        request_writer->write(request);
+      if (inbox->should_request(snapshot ? snapshot->version() : after, Clock::now())) {
+        request_snapshot();
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     return nullptr;
   }
 
-  int run(const std::atomic<bool>& stop) {
-    const auto start = Clock::now();
-    auto snapshot = wait_for_snapshot(stop);
-    if (snapshot == nullptr) {
-      if (stop.load()) return 0;
-      INDRIVE_LOG(kError, "evaluator")
-          << "no policy snapshot arrived within "
-          << config.config().get<double>("eval.snapshot_timeout_s") << " s; is the learner of run '"
-          << config.run_id() << "' running on domain " << config.domain_id() << "?";
-      return 2;
-    }
-    policy.load_snapshot(snapshot->params());
-    INDRIVE_LOG(kInfo, "evaluator")
-        << "evaluator " << index << "/" << count << " evaluates snapshot v" << snapshot->version()
-        << ", received " << std::chrono::duration<double>(Clock::now() - start).count()
-        << " s after start";
+  // Turns a learner's snapshot into the policy, checking it has the head to evaluate.
+  void load(const msg::PolicySnapshot& snapshot) {
+    policy = make_snapshot_policy(
+        agent_config, snapshot.params(), head,
+        "snapshot v" + std::to_string(snapshot.version()) + " of run " + config.run_id());
+  }
 
+  EpisodeOutcome run_episode(const EpisodeSpec& spec, const std::atomic<bool>& stop,
+                             bool* stopped) {
+    env::StepResult step =
+        env->reset({.town = spec.town,
+                    .route = spec.route,
+                    .density = spec.density,
+                    .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
+                    .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
+    const env::Route* route = env->route();
+    INDRIVE_CHECK(route != nullptr) << "an evaluation reset must place the ego on its route";
+    const config::Config& c = config.config();
+    const int budget = route_step_budget(route->length_m(), c.get<double>("eval.budget_speed_mps"),
+                                         c.get<double>("eval.budget_slack"));
+    policy->begin(*env, spec);
+    std::optional<EpisodeVideo> video;
+    if (spec.episode < c.get<int>("eval.video_episodes")) {
+      video.emplace(
+          config.run_dir() / "videos" /
+              ("eval-" + file_part(spec.town) + "-" + spec.route + "-" +
+               std::to_string(spec.density) + "-" + std::to_string(spec.episode) + ".mp4"),
+          *env, spec, budget);
+      video->add(*env, step);
+    }
+    EpisodeOutcome outcome;
+    while (!step.is_last && step.step < budget && !stop.load()) {
+      step = env->step(policy->act(*env, step));
+      outcome.episode_return += step.reward.value_or(0.0);
+      if (video) video->add(*env, step);
+    }
+    *stopped = !step.is_last && step.step < budget;
+    outcome.events = step.events;
+    const bool budget_ran_out = !step.is_last && !*stopped;
+    if (budget_ran_out) outcome.events |= env::kTimeLimit;
+    outcome.steps = step.step;
+    outcome.route_completion =
+        route->length_m() <= 0.0 ? 0.0 : std::min(1.0, step.route_progress_m / route->length_m());
+    if (video) video->finish(outcome.events, budget_ran_out);
+    return outcome;
+  }
+
+  // Runs this evaluator's episodes with the current policy; returns how many finished.
+  int run_episodes(const std::atomic<bool>& stop, std::uint64_t version, std::uint64_t env_steps,
+                   EpisodeCsvWriter* csv, CurveWriter* curve) {
     const auto episodes = grid.episodes_for(index, count);
-    std::filesystem::create_directories(config.run_dir() / "eval");
-    EpisodeCsvWriter csv(config.run_dir() / "eval" /
-                         ("evaluator-" + std::to_string(index) + ".csv"));
-    const agent::AgentConfig& a = agent_config;
-    const std::string method = a.phase == agent::Phase::kDreamer
-                                   ? "dreamer"
-                                   : std::string(agent::to_string(a.intrinsic.method));
-    const std::string task =
-        a.phase == agent::Phase::kPretrain ? "exploration" : std::string(a.task);
     int done = 0;
     for (const EpisodeSpec& spec : episodes) {
       if (stop.load()) break;
-      env::StepResult step =
-          env->reset({.town = spec.town,
-                      .route = spec.route,
-                      .density = spec.density,
-                      .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
-                      .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
-      agent::PolicyState state;
-      double episode_return = 0.0;
-      while (!step.is_last && !stop.load()) {
-        const int action = policy.act_eval(
-            std::span<const std::uint8_t>(step.observation.data, step.observation.total()),
-            step.is_first, state);
-        step = env->step(action);
-        episode_return += step.reward.value_or(0.0);
-      }
-      if (!step.is_last) break;
-      const std::uint32_t failures = step.events & env::kFailureEvents;
-      const env::Route* route = env->route();
+      bool stopped = false;
+      const EpisodeOutcome outcome = run_episode(spec, stop, &stopped);
+      if (stopped) break;
+      const std::uint32_t failures = outcome.events & env::kFailureEvents;
       EpisodeRecord record;
       record.run_id = config.run_id();
       record.method = method;
       record.eval_kind = config.config().get<std::string>("eval.kind");
       record.task = task;
       record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
-      record.policy_version = static_cast<long long>(snapshot->version());
+      record.policy_version = static_cast<long long>(version);
       record.town = spec.town;
       record.route = spec.route;
       record.density = spec.density;
       record.traffic_seed = spec.traffic_seed;
       record.spawn_seed = spec.spawn_seed;
       record.episode = spec.episode;
-      record.success = (step.events & env::kDestination) != 0 && failures == 0;
+      record.success = (outcome.events & env::kDestination) != 0 && failures == 0;
       record.failure_reason = record.success ? "" : env::event_names(failures);
-      record.steps = step.step;
-      record.route_completion = route == nullptr || route->length_m() <= 0.0
-                                    ? 0.0
-                                    : std::min(1.0, step.route_progress_m / route->length_m());
-      record.episode_return = episode_return;
-      csv.write(record);
-
-      msg::EpisodeResult result;
-      result.run_id(config.run_id());
-      result.sender_role(msg::ROLE_EVALUATOR);
-      result.sender_id(static_cast<std::uint32_t>(index));
-      result.phase(msg::PHASE_EVALUATION);
-      result.policy_version(snapshot->version());
-      result.town(spec.town);
-      result.route(spec.route);
-      result.density(static_cast<std::uint32_t>(spec.density));
-      result.traffic_seed(static_cast<std::uint32_t>(spec.traffic_seed));
-      result.spawn_seed(static_cast<std::uint32_t>(spec.spawn_seed));
-      result.success(record.success);
-      result.failure_reason(record.failure_reason);
-      result.steps(static_cast<std::uint32_t>(record.steps));
-      result.route_completion(static_cast<float>(record.route_completion));
-      result.episode_return(static_cast<float>(episode_return));
-      dds::seal(result);
-      result_writer->write(result);
+      record.steps = outcome.steps;
+      record.route_completion = outcome.route_completion;
+      record.episode_return = outcome.episode_return;
+      if (csv != nullptr) csv->write(record);
+      if (curve != nullptr) curve->write(env_steps, record);
+      publish(record, version);
       ++done;
     }
-    INDRIVE_LOG(kInfo, "evaluator")
-        << "evaluator " << index << " ran " << done << " of " << episodes.size() << " episodes";
-    result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
+    INDRIVE_LOG(kInfo, "evaluator") << "evaluator " << index << " (" << method << ") ran " << done
+                                    << " of " << episodes.size() << " episodes";
+    return done;
+  }
+
+  void publish(const EpisodeRecord& record, std::uint64_t version) {
+    if (!result_writer) return;
+    msg::EpisodeResult result;
+    result.run_id(config.run_id());
+    result.sender_role(msg::ROLE_EVALUATOR);
+    result.sender_id(static_cast<std::uint32_t>(index));
+    result.phase(msg::PHASE_EVALUATION);
+    result.policy_version(version);
+    result.town(record.town);
+    result.route(record.route);
+    result.density(static_cast<std::uint32_t>(record.density));
+    result.traffic_seed(static_cast<std::uint32_t>(record.traffic_seed));
+    result.spawn_seed(static_cast<std::uint32_t>(record.spawn_seed));
+    result.success(record.success);
+    result.failure_reason(record.failure_reason);
+    result.steps(static_cast<std::uint32_t>(record.steps));
+    result.route_completion(static_cast<float>(record.route_completion));
+    result.episode_return(static_cast<float>(record.episode_return));
+    dds::seal(result);
+    result_writer->write(result);
+  }
+
+  int run(const std::atomic<bool>& stop) {
+    std::filesystem::create_directories(config.run_dir() / "eval");
+    if (continuous) return run_continuous(stop);
+    std::uint64_t version = 0;
+    if (!policy) {
+      // A learner's snapshot over DDS.
+      const auto start = Clock::now();
+      const double timeout_s = config.config().get<double>("eval.snapshot_timeout_s");
+      auto snapshot =
+          wait_for_snapshot(stop, 0, config.config().get<bool>("eval.wait_for_done"), timeout_s);
+      if (snapshot == nullptr) {
+        if (stop.load()) return 0;
+        INDRIVE_LOG(kError, "evaluator")
+            << "no policy snapshot arrived within " << timeout_s << " s; is the learner of run '"
+            << config.run_id() << "' running on domain " << config.domain_id() << "?";
+        return 2;
+      }
+      load(*snapshot);
+      version = snapshot->version();
+      // Kept so the same snapshot can be evaluated again without a learner (--snapshot FILE).
+      write_snapshot_file(
+          config.run_dir() / "eval" / ("snapshot-v" + std::to_string(version) + ".params"),
+          snapshot->params());
+      INDRIVE_LOG(kInfo, "evaluator")
+          << "evaluator " << index << "/" << count << " evaluates snapshot v" << version
+          << ", received " << std::chrono::duration<double>(Clock::now() - start).count()
+          << " s after start";
+    }
+    EpisodeCsvWriter csv(results_file());
+    run_episodes(stop, version, 0, &csv, nullptr);
+    if (result_writer) result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
     return 0;
+  }
+
+  int run_continuous(const std::atomic<bool>& stop) {
+    const int every_k = config.config().get<int>("eval.every_k");
+    const double timeout_s = config.config().get<double>("eval.snapshot_timeout_s");
+    CurveWriter curve(config.run_dir() / "eval" / ("curve-" + std::to_string(index) + ".csv"));
+    std::uint64_t evaluated = 0;
+    int evaluations = 0;
+    while (!stop.load()) {
+      const std::uint64_t final_version = learner_done.load();
+      if (final_version > 0 && evaluated >= final_version) break;
+      // The next snapshot at least every_k versions on, or the final one, whichever comes.
+      std::shared_ptr<const msg::PolicySnapshot> next;
+      const auto start = Clock::now();
+      while (!stop.load() && next == nullptr) {
+        auto newest = inbox->take_newer_than(evaluated);
+        const std::uint64_t done_version = learner_done.load();
+        if (newest != nullptr && (evaluated == 0 || newest->version() >= evaluated + every_k ||
+                                  (done_version > 0 && newest->version() >= done_version))) {
+          next = newest;
+          break;
+        }
+        if (done_version > 0 && evaluated >= done_version) break;
+        if (inbox->should_request(newest ? newest->version() : evaluated, Clock::now())) {
+          request_snapshot();
+        }
+        if (std::chrono::duration<double>(Clock::now() - start).count() > timeout_s) {
+          INDRIVE_LOG(kError, "evaluator")
+              << "no new snapshot within " << timeout_s << " s after v" << evaluated;
+          return evaluations > 0 ? 0 : 2;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      }
+      if (next == nullptr) break;
+      load(*next);
+      INDRIVE_LOG(kInfo, "evaluator")
+          << "evaluator " << index << " evaluates snapshot v" << next->version() << " at "
+          << next->env_steps() << " env steps for the learning curve";
+      run_episodes(stop, next->version(), next->env_steps(), nullptr, &curve);
+      evaluated = next->version();
+      ++evaluations;
+    }
+    if (result_writer) result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
+    return 0;
+  }
+
+  std::filesystem::path results_file() const {
+    return config.run_dir() / "eval" / ("evaluator-" + std::to_string(index) + ".csv");
   }
 
   const ServiceConfig& config;
@@ -210,8 +477,14 @@ struct Evaluator::Impl {
   int count;
   agent::AgentConfig agent_config;
   ProtocolGrid grid;
-  SnapshotInbox inbox;
-  agent::Policy policy;
+  PolicySource source = PolicySource::kSnapshot;
+  PolicyHead head = PolicyHead::kExploration;
+  std::filesystem::path snapshot_file;
+  bool continuous = false;
+  std::string method;
+  std::string task;
+  std::unique_ptr<EpisodePolicy> policy;
+  std::unique_ptr<SnapshotInbox> inbox;
   std::atomic<std::uint64_t> learner_done{0};
   std::unique_ptr<dds::Participant> participant;
   std::unique_ptr<dds::Writer<msg::EpisodeResult>> result_writer;
@@ -226,5 +499,6 @@ Evaluator::Evaluator(const ServiceConfig& config, int index, int count)
     : impl_(std::make_unique<Impl>(config, index, count)) {}
 Evaluator::~Evaluator() = default;
 int Evaluator::run(const std::atomic<bool>& stop) { return impl_->run(stop); }
+std::filesystem::path Evaluator::results_file() const { return impl_->results_file(); }
 
 }  // namespace indrive::actor

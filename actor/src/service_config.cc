@@ -102,7 +102,25 @@ void declare_service_schema(config::Schema& schema) {
                 "evaluate the learner's last snapshot (wait until it reports done)")
       .add_float("eval.snapshot_timeout_s", 3600.0, "give up when no snapshot comes in time", 1.0)
       .add_choice("eval.kind", "zero_shot", {"zero_shot", "few_shot"},
-                  "evaluation kind written to the results");
+                  "evaluation kind written to the results")
+      .add_choice("eval.policy", "snapshot", {"snapshot", "oracle", "random"},
+                  "what drives: a snapshot (learner's or eval.snapshot_file), the route "
+                  "follower, or uniform actions")
+      .add_string("eval.snapshot_file", "",
+                  "snapshot file (parameter blob, <run>/eval/snapshot-v<N>.params) to evaluate "
+                  "without DDS; empty: the learner's")
+      .add_choice("eval.head", "auto", {"auto", "exploration", "task"},
+                  "actor that acts; auto: exploration for zero_shot, task for few_shot")
+      .add_bool("eval.oracle_brake", true, "the oracle coasts behind a vehicle ahead on its route")
+      .add_float("eval.oracle_speed_mps", 5.0, "target speed of the oracle", 0.5, 6.0)
+      .add_float("eval.budget_speed_mps", 3.0,
+                 "step budget of an episode: route length at this speed ...", 0.1)
+      .add_float("eval.budget_slack", 1.5, "... times this slack", 1.0)
+      .add_int("eval.video_episodes", 0,
+               "record the first N episodes of every cell to <run>/videos/eval-*.mp4", 0)
+      .add_bool("eval.continuous", false,
+                "evaluate every eval.every_k-th new snapshot into eval/curve-<id>.csv")
+      .add_int("eval.every_k", 1, "snapshot versions between continuous evaluations", 1);
   dds::declare_config(schema);
 }
 

@@ -53,6 +53,9 @@ const CellStats* find_cell(const Table& table, const std::string& method, const 
   return r == t->second.end() ? nullptr : &r->second;
 }
 
+// eval/curve-<J>.csv files hold learning curves of a continuous evaluator.
+bool is_curve_file(const fs::path& path) { return path.filename().string().starts_with("curve-"); }
+
 void push_unique(std::vector<std::string>& list, const std::string& value) {
   if (std::find(list.begin(), list.end(), value) == list.end()) list.push_back(value);
 }
@@ -328,14 +331,18 @@ std::vector<EpisodeRecord> load_results(const std::vector<fs::path>& inputs) {
     if (!fs::is_directory(input)) {
       std::string message = "results path ";
       message += input.string();
-      message += " does not exist";
+      message +=
+          " does not exist; name a run directory (runs/<run_id>), its eval/ folder or a "
+          "results CSV";
       throw CsvError(message);
     }
     const fs::path folder = fs::is_directory(input / "eval") ? input / "eval" : input;
     std::vector<fs::path> found;
     for (const auto& entry : fs::directory_iterator(folder)) {
-      if (entry.is_regular_file() && entry.path().extension() == ".csv")
-        found.push_back(entry.path());
+      if (!entry.is_regular_file() || entry.path().extension() != ".csv") continue;
+      // Learning curves (continuous evaluation) have their own columns and are not tables.
+      if (is_curve_file(entry.path())) continue;
+      found.push_back(entry.path());
     }
     std::sort(found.begin(), found.end());
     files.insert(files.end(), found.begin(), found.end());

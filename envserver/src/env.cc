@@ -85,7 +85,16 @@ StepResult Env::reset(const ResetOptions& options) {
   // A fresh simulation per episode: the same seeds give the same episode.
   sumo_->load(town_->net_file, options.traffic_seed);
   ego_ = EgoState{.pose = start};
-  sumo_->add_ego(kEgoId, start_edge);
+  // On a route SUMO gets the ego's path (a loop three laps over, more than any budget lets it
+  // drive), so traffic at junctions yields to it as to any vehicle on the major road.
+  std::vector<std::string> ego_route;
+  if (route_ != nullptr) {
+    const int laps = route_->is_loop() ? 3 : 1;
+    for (int lap = 0; lap < laps; ++lap) {
+      ego_route.insert(ego_route.end(), route_->spec().edges.begin(), route_->spec().edges.end());
+    }
+  }
+  sumo_->add_ego(kEgoId, start_edge, ego_route);
   sumo_->place_ego(kEgoId, ego_.pose, 0.0);
   traffic_->reset(options.density, options.traffic_seed, ego_.pose);
   sumo_->step();  // inserts the ego and the first traffic

@@ -98,4 +98,24 @@ cv::Mat compose_frame(const cv::Mat& camera_rgb, const cv::Mat& bev_rgb,
   return frame;
 }
 
+void draw_banner(cv::Mat& frame, const std::string& text, const cv::Scalar& band_rgb) {
+  if (frame.empty() || frame.type() != CV_8UC3) {
+    throw VideoError("draw_banner needs a non-empty CV_8UC3 frame");
+  }
+  // The band takes a fifth of the height; the text is sized to it and kept inside the width.
+  const int band_height = std::max(12, frame.rows / 5);
+  const cv::Rect band(0, frame.rows - band_height, frame.cols, band_height);
+  cv::rectangle(frame, band, band_rgb, cv::FILLED);
+  double scale = band_height / 40.0;
+  int baseline = 0;
+  cv::Size size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, scale, 2, &baseline);
+  if (size.width > frame.cols - 12) {
+    scale *= static_cast<double>(frame.cols - 12) / size.width;
+    size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, scale, 2, &baseline);
+  }
+  const cv::Point origin((frame.cols - size.width) / 2, band.y + (band_height + size.height) / 2);
+  cv::putText(frame, text, origin, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(255, 255, 255), 2,
+              cv::LINE_AA);
+}
+
 }  // namespace indrive::env

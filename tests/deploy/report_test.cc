@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <fstream>
+
 #include "testing.h"
 
 namespace indrive::deploy {
@@ -90,7 +92,32 @@ TEST(Report, EmptyInputsAreClearErrors) {
   } catch (const CsvError& error) {
     EXPECT_NE(std::string(error.what()).find("run an evaluation first"), std::string::npos);
   }
-  EXPECT_THROW(load_results({dir.path() / "missing"}), CsvError);
+  try {
+    load_results({dir.path() / "missing"});
+    FAIL();
+  } catch (const CsvError& error) {
+    const std::string message = error.what();
+    EXPECT_NE(message.find((dir.path() / "missing").string()), std::string::npos) << message;
+    EXPECT_NE(message.find("does not exist; name a run directory"), std::string::npos) << message;
+  }
+}
+
+TEST(Report, LearningCurveFilesAreLeftOutOfTheTables) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir.path() / "eval");
+  std::vector<EpisodeRecord> records;
+  add_episodes(records, "disag", 0, "town01", "straight", 10, 3, 2);
+  {
+    EpisodeCsvWriter writer(dir.path() / "eval" / "evaluator-0.csv");
+    for (const auto& r : records) writer.write(r);
+  }
+  // A curve file with other columns: reading it as results would throw.
+  std::ofstream(dir.path() / "eval" / "curve-0.csv") << "env_steps,policy_version\n100,1\n";
+  const auto loaded = load_results({dir.path()});
+  EXPECT_EQ(loaded.size(), 3u);
+  // Only a curve file: nothing to report, and the error says so.
+  std::filesystem::remove(dir.path() / "eval" / "evaluator-0.csv");
+  EXPECT_THROW(load_results({dir.path()}), CsvError);
 }
 
 }  // namespace

@@ -85,5 +85,25 @@ TEST(ComposeFrameTest, PlacesCameraAndBevSideBySideWithText) {
   EXPECT_THROW(compose_frame(cv::Mat(), bev, {}, 256), VideoError);
 }
 
+TEST(DrawBannerTest, FillsTheBottomFifthWithTheBandAndWhiteText) {
+  cv::Mat frame(200, 300, CV_8UC3, cv::Scalar(10, 20, 30));
+  draw_banner(frame, "collision+lane_invasion", cv::Scalar(200, 30, 30));
+  // Above the band nothing changed.
+  cv::Mat unchanged;
+  cv::inRange(frame(cv::Rect(0, 0, 300, 160)), cv::Scalar(10, 20, 30), cv::Scalar(10, 20, 30),
+              unchanged);
+  EXPECT_EQ(cv::countNonZero(unchanged), 300 * 160);
+  // The band: its colour at the edges, white text in the middle, all inside the frame width.
+  EXPECT_EQ(frame.at<cv::Vec3b>(199, 0), cv::Vec3b(200, 30, 30));
+  EXPECT_EQ(frame.at<cv::Vec3b>(161, 299), cv::Vec3b(200, 30, 30));
+  cv::Mat white;
+  cv::inRange(frame(cv::Rect(0, 160, 300, 40)), cv::Scalar(240, 240, 240),
+              cv::Scalar(255, 255, 255), white);
+  EXPECT_GT(cv::countNonZero(white), 30);
+  EXPECT_EQ(cv::countNonZero(white(cv::Rect(0, 0, 3, 40))), 0);
+  cv::Mat empty;
+  EXPECT_THROW(draw_banner(empty, "x"), VideoError);
+}
+
 }  // namespace
 }  // namespace indrive::env

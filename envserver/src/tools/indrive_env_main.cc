@@ -3,6 +3,7 @@
 //   indrive-env episode --town town01 --route straight --density 10 --policy follower
 //                       --seed 1 --video out.mp4
 //   indrive-env routes --town town01 --out town01.png
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
@@ -93,8 +94,12 @@ int run_routes(std::map<std::string, std::string> flags) {
   std::printf("%s: %zu lanes, %zu routes, %zu spawn points -> %s\n", town_name.c_str(),
               town.net.lanes().size(), town.routes.size(), town.spawns.size(), out.c_str());
   for (const Route& route : town.routes) {
-    std::printf("  %-10s %7.1f m %s, %zu turns\n", route.name().c_str(), route.length_m(),
-                route.is_loop() ? "loop" : "point to point", route.turns().size());
+    // Route::turns() lists every junction crossed; going straight through one is no turn.
+    const auto turns = std::count_if(route.turns().begin(), route.turns().end(),
+                                     [](TurnDirection d) { return d != TurnDirection::kStraight; });
+    std::printf("  %-10s %7.1f m %s, %td turns, %zu junctions\n", route.name().c_str(),
+                route.length_m(), route.is_loop() ? "loop" : "point to point", turns,
+                route.turns().size());
   }
   return 0;
 }

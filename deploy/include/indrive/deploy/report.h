@@ -69,7 +69,8 @@ std::string render_latex(const Report& report);
 std::string render_csv(const Report& report);
 
 // Reads every results CSV under `inputs` (run directories: their eval/ folder; folders: their
-// *.csv; or files). Throws CsvError naming what was searched when nothing is found.
+// *.csv except learning curves, curve-*.csv; or files). Throws CsvError naming what was
+// searched and what to do when a path does not exist or no episode is found.
 std::vector<EpisodeRecord> load_results(const std::vector<std::filesystem::path>& inputs);
 
 // 95% Wilson score interval for `successes` out of `n`, in percent.

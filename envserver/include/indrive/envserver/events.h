@@ -12,7 +12,8 @@
 //   off_road         the ego's footprint centre is on no lane and in no junction
 //   stall            speed under 1 km/h for 60 s in a row
 //   destination      the route's end reached or its loop completed (from the route tracker)
-//   time_limit       the episode reached its step limit (1000 steps)
+//   time_limit       the episode reached its step limit (EventConfig::time_limit_steps; the
+//                    evaluator sets a per-route budget instead, 5 steps per metre of route)
 //
 //   EventDetector events(net, EventConfig{}, ego_params);
 //   events.reset();

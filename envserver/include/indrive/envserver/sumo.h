@@ -114,8 +114,12 @@ class SumoConnection {
                            double speed_mps) = 0;
   // Removes a vehicle (inserted or still pending); unknown ids are ignored.
   virtual void remove_vehicle(const std::string& id) = 0;
-  // Adds the externally driven ego: SUMO never moves it, only place_ego() does.
-  virtual void add_ego(const std::string& id, const std::string& edge_id) = 0;
+  // Adds the externally driven ego: SUMO never moves it, only place_ego() does. route_edges,
+  // when given, is the path the ego is going to drive (starting on edge_id): SUMO then
+  // registers the ego's approach at the junctions ahead, so traffic on minor roads yields to
+  // it; with only its start edge the ego is invisible to SUMO's right-of-way.
+  virtual void add_ego(const std::string& id, const std::string& edge_id,
+                       const std::vector<std::string>& route_edges = {}) = 0;
   // Puts the ego at a pose anywhere (free placement, no route constraint) for the next step,
   // so that SUMO traffic sees it and reacts to it.
   virtual void place_ego(const std::string& id, const Pose2& pose, double speed_mps) = 0;

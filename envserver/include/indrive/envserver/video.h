@@ -58,4 +58,10 @@ class VideoWriter {
 cv::Mat compose_frame(const cv::Mat& camera_rgb, const cv::Mat& bev_rgb,
                       std::span<const std::string> text_lines, int height_px = 256);
 
+// Draws `text` in large white letters on a filled band across the bottom of `frame` (CV_8UC3,
+// RGB), in the colour `band_rgb`: the event overlay of evaluation videos, so an event that
+// fires stands out for the frames it is shown on. Throws VideoError for an empty or non-RGB frame.
+void draw_banner(cv::Mat& frame, const std::string& text,
+                 const cv::Scalar& band_rgb = cv::Scalar(200, 30, 30));
+
 }  // namespace indrive::env

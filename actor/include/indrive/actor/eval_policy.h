@@ -1,0 +1,128 @@
+// What drives the car in an evaluation episode: a frozen snapshot of the agent, a scripted
+// oracle (the route follower), or uniformly random actions; plus the checks of the evaluator's
+// inputs (grid names, snapshot heads) and the per-route step budget.
+//
+// Snapshot files: a snapshot on disk is the parameter blob of Agent::snapshot() (the bytes a
+// PolicySnapshot carries in `params`: world model group, then one actor group, "expl_actor" in
+// pretraining or "task_actor" in finetune/dreamer, with a trailing CRC-32). The DDS evaluator
+// saves the snapshot it evaluates as <run>/eval/snapshot-v<version>.params, so it can be
+// evaluated again later without a learner: `indrive-actor --evaluate --snapshot FILE`.
+//
+//   auto policy = make_oracle_policy({.brake_for_leader = true});
+//   policy->begin(env, spec);               // after env.reset()
+//   int action = policy->act(env, result);  // every step
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "indrive/actor/protocol.h"
+#include "indrive/common/agent/config.h"
+#include "indrive/envserver/env.h"
+
+namespace indrive::actor {
+
+// A bad evaluator input (unknown town, route, policy or head; unreadable snapshot file; a
+// snapshot without the head asked for). The message names the value and what is allowed.
+class EvalError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Where the evaluated actions come from.
+enum class PolicySource { kSnapshot, kOracle, kRandom };
+// Parses "snapshot", "oracle" or "random"; throws EvalError listing them otherwise.
+PolicySource parse_policy_source(const std::string& text);
+// The name parse_policy_source() reads back.
+const char* to_string(PolicySource source);
+
+// Which actor of a snapshot acts: the exploration actor (zero-shot) or the task actor
+// (few-shot).
+enum class PolicyHead { kExploration, kTask };
+// Resolves eval.head: "exploration", "task", or "auto" (exploration for eval_kind zero_shot,
+// task for few_shot). Throws EvalError for anything else.
+PolicyHead resolve_head(const std::string& head, const std::string& eval_kind);
+// The parameter-group name of a head's actor ("expl_actor" or "task_actor").
+const char* head_group(PolicyHead head);
+
+// Throws EvalError unless every town is a built-in name, an existing map file or grid:<seed>,
+// and every route is one of the four route names; the message lists the allowed values.
+void check_grid_names(const ProtocolGrid& grid);
+
+// Names of the parameter groups in a parameter blob, in order (no values are copied). Throws
+// EvalError when the blob is not one (bad magic, truncated, checksum mismatch).
+std::vector<std::string> snapshot_groups(std::span<const std::uint8_t> blob);
+// Throws EvalError naming `source`, the groups the snapshot holds and what to do, when the
+// blob has no actor group for `head`.
+void check_snapshot_head(std::span<const std::uint8_t> blob, PolicyHead head,
+                         const std::string& source);
+// Reads a snapshot file; throws EvalError when it is missing, empty or not a parameter blob.
+std::vector<std::uint8_t> read_snapshot_file(const std::filesystem::path& path);
+// Writes a snapshot file atomically (used to keep the snapshot an evaluator evaluated).
+void write_snapshot_file(const std::filesystem::path& path, std::span<const std::uint8_t> blob);
+
+// Step budget of a route: ceil(slack * length_m / (speed_mps * dt_s)). With the defaults
+// (3 m/s, the slower task speed, and 1.5x slack at 10 Hz) that is 5 steps per metre: 3,245 steps
+// for town01's longest loop (649 m), where a fixed 1,000 steps (100 s) covers 300-600 m at
+// 3-6 m/s, less than one lap.
+int route_step_budget(double length_m, double speed_mps = 3.0, double slack = 1.5,
+                      double dt_s = 0.1);
+
+// One episode's driver.
+class EpisodePolicy {
+ public:
+  virtual ~EpisodePolicy() = default;
+  // Starts an episode that env.reset() has just begun with `spec`.
+  virtual void begin(const env::Env& env, const EpisodeSpec& spec) = 0;
+  // Returns the action in [0, 9) for the latest result (the reset's, then each step's).
+  virtual int act(const env::Env& env, const env::StepResult& result) = 0;
+};
+
+// The agent's frozen policy on a parameter blob. agent_config gives the sizes; its phase is
+// overridden to match `head`. Throws EvalError when the blob lacks the head or does not fit
+// the config's architecture (the message names `source` and the preset).
+std::unique_ptr<EpisodePolicy> make_snapshot_policy(agent::AgentConfig agent_config,
+                                                    std::span<const std::uint8_t> blob,
+                                                    PolicyHead head, const std::string& source);
+
+// Tuning of the oracle.
+struct OracleOptions {
+  double target_speed_mps = 5.0;
+  // Coast (throttle 0, the only way to slow down with the 9 actions) while a vehicle is on the
+  // route ahead within the stopping distance plus a margin. Off: the follower alone.
+  bool brake_for_leader = true;
+  double headway_s = 2.0;   // margin grows with speed: this many seconds of travel
+  double min_gap_m = 10.0;  // centre-to-centre distance that always triggers coasting
+  double corridor_m = 2.2;  // a vehicle this close to the route centre line is "on" it
+  // Crossing traffic (a left turn across oncoming cars, a car entering a junction): coast
+  // when the ego's path along the route and another car's straight-line path, both grown by
+  // `clearance_m`, meet within `horizon_s`. Coasting from 5 m/s takes about 5 s and 9 m.
+  double horizon_s = 4.0;
+  double clearance_m = 0.6;
+  double min_plan_speed_mps = 3.0;  // the ego's path assumes at least this speed (it speeds up)
+};
+// The route follower (envserver WaypointFollower) driving the episode's route with the 9
+// discrete actions, optionally coasting behind a leading vehicle.
+std::unique_ptr<EpisodePolicy> make_oracle_policy(const OracleOptions& options);
+// True when a vehicle (box) lies on `route` ahead of arc length ego_s_m, within `ahead_m`
+// along it and `corridor_m` of its centre line: the oracle's braking test.
+bool leader_ahead(const env::Route& route, double ego_s_m, std::span<const env::Box> others,
+                  double ahead_m, double corridor_m);
+
+// True when `ego` (a box of the ego's size) driven along `route` from arc length ego_s_m at
+// max(speed, min_plan_speed_mps) meets one of `others` moving straight at its velocity
+// (velocities[i] in m/s, world frame, one per box) within options.horizon_s, both boxes grown
+// by options.clearance_m. Vehicles behind the ego are left out: they must mind the ego.
+bool conflict_ahead(const env::Route& route, const env::Box& ego, double ego_s_m,
+                    double ego_speed_mps, std::span<const env::Box> others,
+                    std::span<const Eigen::Vector2d> velocities, const OracleOptions& options);
+
+// Uniform actions; the episode's policy seed (with `seed`) makes each episode reproducible.
+std::unique_ptr<EpisodePolicy> make_random_policy(std::uint64_t seed);
+
+}  // namespace indrive::actor

@@ -1,0 +1,184 @@
+// Tests of the evaluator's inputs and policy sources: names checked against what exists,
+// snapshot files and heads, the step budget, and the oracle's test for a vehicle ahead.
+#include "indrive/actor/eval_policy.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "indrive/common/agent/agent.h"
+#include "indrive/envserver/town.h"
+#include "testing.h"
+
+namespace indrive::actor {
+namespace {
+
+// The message of the EvalError `body` throws ("" when it throws nothing).
+template <typename F>
+std::string eval_error_of(F&& body) {
+  try {
+    body();
+  } catch (const EvalError& error) {
+    return error.what();
+  }
+  return "";
+}
+
+std::vector<std::uint8_t> tiny_snapshot(agent::Phase phase) {
+  agent::AgentConfig config = agent::preset("tiny");
+  config.phase = phase;
+  agent::Agent agent(config);
+  return agent.snapshot();
+}
+
+TEST(EvalPolicy, PolicySourceAndHeadNamesAreCheckedWithTheAllowedValues) {
+  EXPECT_EQ(parse_policy_source("oracle"), PolicySource::kOracle);
+  EXPECT_EQ(parse_policy_source("random"), PolicySource::kRandom);
+  EXPECT_EQ(parse_policy_source("snapshot"), PolicySource::kSnapshot);
+  const std::string message = eval_error_of([] { parse_policy_source("scripted"); });
+  EXPECT_NE(message.find("'scripted'"), std::string::npos) << message;
+  EXPECT_NE(message.find("oracle"), std::string::npos) << message;
+
+  EXPECT_EQ(resolve_head("auto", "zero_shot"), PolicyHead::kExploration);
+  EXPECT_EQ(resolve_head("auto", "few_shot"), PolicyHead::kTask);
+  EXPECT_EQ(resolve_head("task", "zero_shot"), PolicyHead::kTask);
+  EXPECT_NE(eval_error_of([] { resolve_head("critic", "zero_shot"); }).find("'critic'"),
+            std::string::npos);
+}
+
+TEST(EvalPolicy, UnknownTownOrRouteNamesTheValueAndWhatExists) {
+  ProtocolGrid grid{.towns = {"town01", "town99"}, .routes = {"straight"}};
+  std::string message = eval_error_of([&] { check_grid_names(grid); });
+  EXPECT_NE(message.find("'town99'"), std::string::npos) << message;
+  EXPECT_NE(message.find("town01, town02"), std::string::npos) << message;
+
+  grid = {.towns = {"town02"}, .routes = {"straight", "figure_eight"}};
+  message = eval_error_of([&] { check_grid_names(grid); });
+  EXPECT_NE(message.find("'figure_eight'"), std::string::npos) << message;
+  EXPECT_NE(message.find("straight, right_loop, left_loop, two_turn"), std::string::npos)
+      << message;
+
+  grid = {.towns = {"town01", "town02", "grid:3"}};
+  EXPECT_NO_THROW(check_grid_names(grid));
+}
+
+TEST(EvalPolicy, SnapshotGroupsAreReadWithoutLoading) {
+  const auto pretrain = tiny_snapshot(agent::Phase::kPretrain);
+  const auto groups = snapshot_groups(pretrain);
+  ASSERT_EQ(groups.size(), 2u);
+  EXPECT_EQ(groups.back(), "expl_actor");
+  const auto finetune = tiny_snapshot(agent::Phase::kFinetune);
+  EXPECT_EQ(snapshot_groups(finetune).back(), "task_actor");
+  EXPECT_EQ(snapshot_groups(finetune).front(), groups.front());  // the same world model group
+
+  // A flipped byte fails the checksum; a cut blob is not one.
+  auto corrupt = pretrain;
+  corrupt[corrupt.size() / 2] ^= 0x5a;
+  EXPECT_NE(eval_error_of([&] { snapshot_groups(corrupt); }).find("checksum"), std::string::npos);
+  const std::vector<std::uint8_t> cut(pretrain.begin(), pretrain.begin() + 10);
+  EXPECT_FALSE(eval_error_of([&] { snapshot_groups(cut); }).empty());
+}
+
+TEST(EvalPolicy, SnapshotMissingTheRequestedHeadIsAClearError) {
+  const auto pretrain = tiny_snapshot(agent::Phase::kPretrain);
+  EXPECT_NO_THROW(check_snapshot_head(pretrain, PolicyHead::kExploration, "snapshot file a"));
+  const std::string message =
+      eval_error_of([&] { check_snapshot_head(pretrain, PolicyHead::kTask, "snapshot file a"); });
+  EXPECT_NE(message.find("snapshot file a"), std::string::npos) << message;
+  EXPECT_NE(message.find("not task_actor"), std::string::npos) << message;
+  EXPECT_NE(message.find("few-shot"), std::string::npos) << message;
+  EXPECT_NE(message.find("eval.kind=zero_shot"), std::string::npos) << message;
+
+  const auto finetune = tiny_snapshot(agent::Phase::kFinetune);
+  EXPECT_NE(eval_error_of([&] {
+              check_snapshot_head(finetune, PolicyHead::kExploration, "x");
+            }).find("not expl_actor"),
+            std::string::npos);
+
+  // Through the policy factory too, before any network is built.
+  agent::AgentConfig config = agent::preset("tiny");
+  EXPECT_FALSE(eval_error_of([&] {
+                 make_snapshot_policy(config, pretrain, PolicyHead::kTask, "s");
+               }).empty());
+  EXPECT_NE(make_snapshot_policy(config, pretrain, PolicyHead::kExploration, "s"), nullptr);
+  EXPECT_NE(make_snapshot_policy(config, finetune, PolicyHead::kTask, "s"), nullptr);
+}
+
+TEST(EvalPolicy, SnapshotOfAnotherPresetNamesThePreset) {
+  const auto pretrain = tiny_snapshot(agent::Phase::kPretrain);
+  const std::string message = eval_error_of([&] {
+    make_snapshot_policy(agent::preset("cpu"), pretrain, PolicyHead::kExploration, "file f");
+  });
+  EXPECT_NE(message.find("file f does not fit the configured model (preset cpu)"),
+            std::string::npos)
+      << message;
+}
+
+TEST(EvalPolicy, SnapshotFilesRoundTripAndBadFilesAreNamed) {
+  testing::TempDir dir;
+  const auto blob = tiny_snapshot(agent::Phase::kPretrain);
+  write_snapshot_file(dir.path() / "snapshot-v3.params", blob);
+  EXPECT_EQ(read_snapshot_file(dir.path() / "snapshot-v3.params"), blob);
+
+  const auto missing = dir.path() / "nope.params";
+  std::string message = eval_error_of([&] { read_snapshot_file(missing); });
+  EXPECT_NE(message.find(missing.string()), std::string::npos) << message;
+  EXPECT_NE(message.find("does not exist"), std::string::npos) << message;
+
+  std::ofstream(dir.path() / "empty.params").close();
+  EXPECT_NE(eval_error_of([&] { read_snapshot_file(dir.path() / "empty.params"); }).find("empty"),
+            std::string::npos);
+  std::ofstream(dir.path() / "text.params") << "this is not a snapshot at all";
+  EXPECT_FALSE(eval_error_of([&] { read_snapshot_file(dir.path() / "text.params"); }).empty());
+}
+
+TEST(EvalPolicy, StepBudgetIsFiveStepsPerMetreByDefault) {
+  EXPECT_EQ(route_step_budget(649.0), 3245);  // town01's longest loop
+  EXPECT_EQ(route_step_budget(200.0), 1000);
+  EXPECT_EQ(route_step_budget(100.0, 5.0, 1.0), 200);
+  EXPECT_EQ(route_step_budget(0.0), 1);
+  // The budget at the oracle's 5 m/s leaves the 1.5x slack of the 3 m/s task speed and more.
+  EXPECT_GT(route_step_budget(649.0), 649.0 / (5.0 * 0.1) * 2.0);
+}
+
+TEST(EvalPolicy, LeaderAheadSeesOnlyVehiclesOnTheRouteInFront) {
+  const env::Town town = env::load_town("town01");
+  const env::Route& route = env::find_route(town.routes, "right_loop");
+  auto box_at = [&](double s_m, double lateral_m) {
+    const env::Pose2 pose = route.pose_at(s_m);
+    env::Box box;
+    box.pose = {pose.x_m - lateral_m * std::sin(pose.yaw_rad),
+                pose.y_m + lateral_m * std::cos(pose.yaw_rad), pose.yaw_rad};
+    return box;
+  };
+  const double ego_s = 50.0;
+  const std::vector<env::Box> ahead = {box_at(ego_s + 12.0, 0.3)};
+  EXPECT_TRUE(leader_ahead(route, ego_s, ahead, 20.0, 2.2));
+  const std::vector<env::Box> far = {box_at(ego_s + 35.0, 0.0)};
+  EXPECT_FALSE(leader_ahead(route, ego_s, far, 20.0, 2.2));
+  const std::vector<env::Box> behind = {box_at(ego_s - 8.0, 0.0)};
+  EXPECT_FALSE(leader_ahead(route, ego_s, behind, 20.0, 2.2));
+  // Oncoming traffic in the next lane (3.5 m to the left) is not a leader.
+  const std::vector<env::Box> oncoming = {box_at(ego_s + 10.0, 3.5)};
+  EXPECT_FALSE(leader_ahead(route, ego_s, oncoming, 20.0, 2.2));
+  // On a loop, "ahead" wraps past the start.
+  const std::vector<env::Box> wrapped = {box_at(5.0, 0.0)};
+  EXPECT_TRUE(leader_ahead(route, route.length_m() - 6.0, wrapped, 20.0, 2.2));
+}
+
+// The grid's route names must mean what they say: `indrive-env routes` once printed "2 turns"
+// for `straight`, counting the junctions it crosses; it crosses them without turning.
+TEST(EvalPolicy, BuiltInStraightRoutesCrossJunctionsWithoutTurning) {
+  for (const char* name : {"town01", "town02"}) {
+    const env::Town town = env::load_town(name);
+    const env::Route& straight = env::find_route(town.routes, "straight");
+    EXPECT_FALSE(straight.is_loop()) << name;
+    EXPECT_FALSE(straight.turns().empty()) << name;
+    for (const env::TurnDirection turn : straight.turns()) {
+      EXPECT_EQ(turn, env::TurnDirection::kStraight) << name;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace indrive::actor

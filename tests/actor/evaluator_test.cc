@@ -1,0 +1,385 @@
+// The evaluator end to end, without a learner: a small protocol grid (2 routes x 1 density x
+// 2 episodes on both built-in towns) driven by the oracle, every CSV row checked against an
+// independent replay of its episode, and the report's cells recomputed by hand from the rows.
+// Also: a snapshot file evaluated without DDS, and the evaluator's bad inputs.
+#include "indrive/actor/evaluator.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <thread>
+
+#include "indrive/actor/eval_policy.h"
+#include "indrive/common/agent/agent.h"
+#include "indrive/common/dds.h"
+#include "indrive/common/episode_csv.h"
+#include "indrive/deploy/report.h"
+#include "indrive/envserver/env.h"
+#include "testing.h"
+
+namespace indrive::actor {
+namespace {
+
+ServiceConfig resolve(const std::filesystem::path& run_dir, std::vector<std::string> overrides) {
+  overrides.insert(overrides.begin(), "preset=tiny");
+  return ServiceConfig::resolve({.run_dir = run_dir, .overrides = overrides});
+}
+
+// What the test's own replay of one episode gives.
+struct Replay {
+  std::uint32_t events = 0;
+  int steps = 0;
+  double progress_m = 0.0;
+  double length_m = 0.0;
+};
+
+// Replays an episode with its own env and loop: same seeds, same budget rule, same policy.
+Replay replay(env::Env& env, const EpisodeSpec& spec, EpisodePolicy& policy) {
+  env::StepResult step = env.reset({.town = spec.town,
+                                    .route = spec.route,
+                                    .density = spec.density,
+                                    .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
+                                    .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
+  policy.begin(env, spec);
+  const int budget = route_step_budget(env.route()->length_m());
+  while (!step.is_last && step.step < budget) step = env.step(policy.act(env, step));
+  Replay out{step.events, step.step, step.route_progress_m, env.route()->length_m()};
+  if (!step.is_last) out.events |= env::kTimeLimit;
+  return out;
+}
+
+// Runs one evaluator (scoped: libsumo holds one simulation per process) and returns its rows.
+std::vector<EpisodeRecord> evaluate(const ServiceConfig& config) {
+  Evaluator evaluator(config, 0, 1);
+  const std::atomic<bool> stop{false};
+  EXPECT_EQ(evaluator.run(stop), 0);
+  return read_episode_csv(evaluator.results_file());
+}
+
+TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
+  testing::TempDir dir;
+  const std::vector<std::string> grid_keys = {
+      "eval.towns=town01,town02", "eval.routes=straight,right_loop", "eval.densities=[10]",
+      "eval.episodes_per_cell=2", "run.seed=4"};
+  auto with = [&](std::vector<std::string> keys) {
+    keys.insert(keys.end(), grid_keys.begin(), grid_keys.end());
+    return keys;
+  };
+  const auto oracle_config = resolve(dir.path() / "oracle-s4", with({"eval.policy=oracle"}));
+  const auto random_config = resolve(dir.path() / "random-s4", with({"eval.policy=random"}));
+  std::vector<EpisodeRecord> rows = evaluate(oracle_config);
+  const std::vector<EpisodeRecord> random_rows = evaluate(random_config);
+  ASSERT_EQ(rows.size(), 8u);
+  ASSERT_EQ(random_rows.size(), 8u);
+  rows.insert(rows.end(), random_rows.begin(), random_rows.end());
+
+  const ProtocolGrid grid{.towns = {"town01", "town02"},
+                          .routes = {"straight", "right_loop"},
+                          .densities = {10},
+                          .episodes_per_cell = 2};
+  const auto specs = grid.all_episodes();
+  env::EnvConfig env_config = oracle_config.env();
+  env_config.events.time_limit_steps = 1 << 30;
+  env::Env env(env_config);
+  auto oracle = make_oracle_policy({});
+  auto random = make_random_policy(4);  // run.seed
+  // [method][{town, route}] -> {episodes, successes}, counted by hand from the rows.
+  std::map<std::string, std::map<std::pair<std::string, std::string>, std::pair<int, int>>> by_hand;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const EpisodeRecord& row = rows[i];
+    const EpisodeSpec& spec = specs[i % specs.size()];
+    const bool is_oracle = i < specs.size();
+    SCOPED_TRACE(row.method + " " + spec.town + "/" + spec.route + " episode " +
+                 std::to_string(spec.episode));
+    EXPECT_EQ(row.run_id, is_oracle ? "oracle-s4" : "random-s4");
+    EXPECT_EQ(row.method, is_oracle ? "oracle" : "random");
+    EXPECT_EQ(row.eval_kind, "zero_shot");
+    EXPECT_EQ(row.task, "exploration");
+    EXPECT_EQ(row.train_seed, 4);
+    EXPECT_EQ(row.town, spec.town);
+    EXPECT_EQ(row.route, spec.route);
+    EXPECT_EQ(row.density, 10);
+    EXPECT_EQ(row.episode, spec.episode);
+    EXPECT_EQ(row.traffic_seed, kTrafficSeeds[spec.episode % 3]);
+    EXPECT_EQ(row.spawn_seed, kSpawnSeeds[spec.episode % 5]);
+    // The two episodes of a cell meet different traffic.
+    if (spec.episode == 1) EXPECT_NE(row.traffic_seed, rows[i - 1].traffic_seed);
+
+    // The episode replayed independently ends the same way.
+    const Replay r = replay(env, spec, is_oracle ? *oracle : *random);
+    const std::uint32_t failures = r.events & env::kFailureEvents;
+    const bool success = (r.events & env::kDestination) != 0 && failures == 0;
+    EXPECT_EQ(row.success, success);
+    EXPECT_EQ(row.failure_reason, success ? "" : env::event_names(failures));
+    EXPECT_EQ(row.steps, r.steps);
+    EXPECT_NEAR(row.route_completion, std::min(1.0, r.progress_m / r.length_m), 1e-6);
+    EXPECT_LE(row.steps, route_step_budget(r.length_m));
+    if (row.success) EXPECT_GT(row.route_completion, 0.95);
+    EXPECT_EQ(row.episode_return, 0.0);  // no reward in zero-shot evaluation
+
+    auto& cell = by_hand[row.method][{row.town, row.route}];
+    ++cell.first;
+    cell.second += row.success ? 1 : 0;
+  }
+  // The bounds the grid exists to show: the oracle drives these routes, random actions do not.
+  for (const auto& [key, counts] : by_hand["oracle"]) EXPECT_EQ(counts.second, 2) << key.first;
+  for (const auto& [key, counts] : by_hand["random"]) EXPECT_EQ(counts.second, 0) << key.first;
+
+  // The report's cells, from the same rows: one seed and one density, so SR = successes / n.
+  const deploy::Report report = deploy::aggregate(rows);
+  const deploy::Table& table = report.tables.at({"zero_shot", "exploration"});
+  EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "right_loop"}));
+  EXPECT_EQ(table.methods, (std::vector<std::string>{"oracle", "random"}));
+  const std::string csv = deploy::render_csv(report);
+  const std::string md = deploy::render_markdown(report, "town01", "town02");
+  for (const auto& [method, cells] : by_hand) {
+    std::map<std::string, double> town_sum;
+    for (const auto& [key, counts] : cells) {
+      const auto& [town, route] = key;
+      const deploy::CellStats& cell = table.cells.at(method).at(town).at(route);
+      const double sr = 100.0 * counts.second / counts.first;
+      EXPECT_EQ(cell.episodes, 2);
+      EXPECT_EQ(cell.successes, counts.second);
+      EXPECT_DOUBLE_EQ(cell.sr, sr);
+      town_sum[town] += sr;
+      char line[160];
+      std::snprintf(line, sizeof(line), "zero_shot,exploration,%s,%s,%s,1,2,%d,%.3f,%.3f,",
+                    method.c_str(), town.c_str(), route.c_str(), counts.second, sr, 100.0 - sr);
+      EXPECT_NE(csv.find(line), std::string::npos) << line << "\n" << csv;
+    }
+    // Average over the two routes per town and the town01 - town02 gap.
+    char average[128];
+    std::snprintf(average, sizeof(average), "| %s | %.1f | %.1f | %.1f |", method.c_str(),
+                  town_sum["town01"] / 2.0, town_sum["town02"] / 2.0,
+                  town_sum["town01"] / 2.0 - town_sum["town02"] / 2.0);
+    EXPECT_NE(md.find(average), std::string::npos) << average << "\n" << md;
+  }
+  // Random episodes fail, and their reasons are counted per route.
+  int random_failures = 0;
+  for (const auto& [town, routes] : table.failures.at("random")) {
+    for (const auto& [route, reasons] : routes) {
+      for (const auto& [reason, n] : reasons) random_failures += n;
+    }
+  }
+  EXPECT_EQ(random_failures, 8);
+}
+
+TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {
+  testing::TempDir dir;
+  agent::AgentConfig agent_config = agent::preset("tiny");
+  agent::Agent agent(agent_config);
+  const auto file = dir.path() / "snapshot-v7.params";
+  write_snapshot_file(file, agent.snapshot());
+  // No DDS: a learner's snapshot would time out after 1 s and return 2.
+  const auto config =
+      resolve(dir.path() / "disag-s1",
+              {"eval.snapshot_file=" + file.string(), "eval.towns=town02", "eval.routes=straight",
+               "eval.densities=[5]", "eval.episodes_per_cell=2", "eval.snapshot_timeout_s=1",
+               "eval.video_episodes=1"});
+  Evaluator evaluator(config, 0, 1);
+  const std::atomic<bool> stop{false};
+  ASSERT_EQ(evaluator.run(stop), 0);
+  const auto rows = read_episode_csv(evaluator.results_file());
+  ASSERT_EQ(rows.size(), 2u);
+  for (const auto& row : rows) {
+    EXPECT_EQ(row.method, "disag");
+    EXPECT_EQ(row.town, "town02");
+    EXPECT_EQ(row.success, row.failure_reason.empty());
+    EXPECT_GT(row.steps, 0);
+  }
+  // The first episode of the cell was recorded; the second was not.
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "disag-s1/videos/eval-town02-straight-5-0.mp4"));
+  EXPECT_FALSE(
+      std::filesystem::exists(dir.path() / "disag-s1/videos/eval-town02-straight-5-1.mp4"));
+}
+
+// Lines of a learning-curve file after its header (0 when it does not exist yet).
+std::vector<std::string> curve_rows(const std::filesystem::path& path) {
+  std::vector<std::string> rows;
+  std::ifstream in(path);
+  std::string line;
+  for (bool header = true; std::getline(in, line); header = false) {
+    if (!header) rows.push_back(line);
+  }
+  return rows;
+}
+
+// A stand-in learner on DDS: publishes snapshots of one (untrained) agent and heartbeats.
+struct StandInLearner {
+  StandInLearner(const ServiceConfig& config)
+      : config(config),
+        agent_config(config.agent()),
+        agent(agent_config),
+        participant(dds::ParticipantOptions{.domain_id = config.domain_id(),
+                                            .profiles_file = config.dds_profile()}),
+        snapshots(participant.make_writer<msg::PolicySnapshot>()),
+        heartbeats(participant.make_writer<msg::Heartbeat>()) {}
+
+  void publish(std::uint64_t version) {
+    msg::PolicySnapshot snapshot;
+    snapshot.run_id(config.run_id());
+    snapshot.version(version);
+    snapshot.preset(agent_config.preset);
+    snapshot.architecture(architecture_descriptor(agent_config));
+    snapshot.heads(msg::HEAD_ENCODER | msg::HEAD_RSSM | msg::HEAD_EXPLORATION_ACTOR);
+    snapshot.phase(msg::PHASE_PRETRAIN);
+    snapshot.env_steps(1000 * version);
+    snapshot.params(agent.snapshot());
+    dds::seal(snapshot);
+    snapshots->write(snapshot);
+  }
+  void beat(bool done, std::uint64_t version) {
+    msg::Heartbeat heartbeat;
+    heartbeat.role(msg::ROLE_LEARNER);
+    heartbeat.run_id(config.run_id());
+    heartbeat.state(done ? "done" : "running");
+    heartbeat.policy_version(version);
+    dds::seal(heartbeat);
+    heartbeats->write(heartbeat);
+  }
+
+  const ServiceConfig& config;
+  agent::AgentConfig agent_config;
+  agent::Agent agent;
+  dds::Participant participant;
+  std::unique_ptr<dds::Writer<msg::PolicySnapshot>> snapshots;
+  std::unique_ptr<dds::Writer<msg::Heartbeat>> heartbeats;
+};
+
+// The default mode over DDS: the evaluator waits for the learner's final snapshot (v2 is
+// published, but only v3 is announced as done), evaluates it, writes rows tagged with its
+// version and keeps it as a snapshot file that evaluates again without DDS.
+TEST(Evaluator, LearnersFinalSnapshotIsEvaluatedAndKeptAsAFile) {
+  testing::TempDir dir;
+  const auto config = resolve(dir.path() / "dds-run",
+                              {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
+                               "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
+                               "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  StandInLearner learner(config);
+  std::atomic<bool> stop{false};
+  std::atomic<int> code{-1};
+  std::thread evaluator_thread([&] {
+    Evaluator evaluator(config, 0, 1);
+    code = evaluator.run(stop);
+  });
+  learner.publish(2);
+  for (int i = 0; i < 10; ++i) {  // 0.5 s of "running": v2 must not be taken
+    learner.beat(false, 2);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  learner.publish(3);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (code.load() < 0 && std::chrono::steady_clock::now() < deadline) {
+    learner.beat(true, 3);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  stop = true;
+  evaluator_thread.join();
+  ASSERT_EQ(code.load(), 0);
+  const auto rows = read_episode_csv(dir.path() / "dds-run/eval/evaluator-0.csv");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].policy_version, 3);
+  EXPECT_EQ(rows[0].method, "disag");
+  const auto kept = dir.path() / "dds-run/eval/snapshot-v3.params";
+  EXPECT_EQ(read_snapshot_file(kept), learner.agent.snapshot());
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "dds-run/eval/snapshot-v2.params"));
+}
+
+// Continuous mode against a stand-in learner: snapshots v1..v5 with every_k = 2 give curve
+// rows for v1 (the first), v3 (two on) and v5 (the final one, announced as done); v2 and v4
+// are skipped. Each row carries its snapshot's version and env steps.
+TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
+  testing::TempDir dir;
+  const auto config = resolve(
+      dir.path() / "curve-run",
+      {"eval.continuous=true", "eval.every_k=2", "eval.towns=town02", "eval.routes=straight",
+       "eval.densities=[5]", "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
+       "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  StandInLearner learner(config);
+  auto publish = [&](std::uint64_t version) { learner.publish(version); };
+  auto beat = [&](bool done, std::uint64_t version) { learner.beat(done, version); };
+
+  std::atomic<bool> stop{false};
+  std::atomic<int> code{-1};
+  const auto curve = dir.path() / "curve-run" / "eval" / "curve-0.csv";
+  std::thread evaluator_thread([&] {
+    Evaluator evaluator(config, 0, 1);
+    code = evaluator.run(stop);
+  });
+  // Publishes `version` and waits until the curve holds `rows` rows.
+  auto step = [&](std::uint64_t version, std::size_t rows, bool done) {
+    publish(version);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (curve_rows(curve).size() < rows && std::chrono::steady_clock::now() < deadline &&
+           code.load() < 0) {
+      beat(done, version);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  };
+  step(1, 1, false);
+  step(2, 1, false);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // v2 must not be evaluated
+  EXPECT_EQ(curve_rows(curve).size(), 1u);
+  step(3, 2, false);
+  step(4, 2, false);
+  step(5, 3, true);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (code.load() < 0 && std::chrono::steady_clock::now() < deadline) {
+    beat(true, 5);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  stop = true;
+  evaluator_thread.join();
+  EXPECT_EQ(code.load(), 0);
+
+  const auto rows = curve_rows(curve);
+  ASSERT_EQ(rows.size(), 3u);
+  const char* expected[] = {"1000,1,disag,zero_shot,exploration,town02,straight,5,",
+                            "3000,3,disag,zero_shot,exploration,town02,straight,5,",
+                            "5000,5,disag,zero_shot,exploration,town02,straight,5,"};
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(rows[i].rfind(expected[i], 0), 0u) << rows[i];
+  // The report reads results, not curves: this run has none.
+  EXPECT_THROW(deploy::load_results({dir.path() / "curve-run"}), CsvError);
+}
+
+// The message of the EvalError constructing an evaluator throws ("" when none).
+std::string setup_error(const ServiceConfig& config) {
+  try {
+    Evaluator evaluator(config, 0, 1);
+  } catch (const EvalError& error) {
+    return error.what();
+  }
+  return "";
+}
+
+TEST(Evaluator, BadInputsAreClearErrorsBeforeAnythingStarts) {
+  testing::TempDir dir;
+  std::string message =
+      setup_error(resolve(dir.path() / "r", {"eval.policy=oracle", "eval.towns=town01,town9"}));
+  EXPECT_NE(message.find("unknown evaluation town 'town9'"), std::string::npos) << message;
+  EXPECT_NE(message.find("town01, town02"), std::string::npos) << message;
+
+  message = setup_error(resolve(dir.path() / "r", {"eval.policy=oracle", "eval.routes=loop"}));
+  EXPECT_NE(message.find("unknown evaluation route 'loop'"), std::string::npos) << message;
+
+  // A pretraining snapshot has no task actor: few-shot evaluation of it is refused.
+  agent::Agent agent(agent::preset("tiny"));
+  const auto file = dir.path() / "pretrain.params";
+  write_snapshot_file(file, agent.snapshot());
+  message = setup_error(
+      resolve(dir.path() / "r", {"eval.snapshot_file=" + file.string(), "eval.kind=few_shot"}));
+  EXPECT_NE(message.find(file.string()), std::string::npos) << message;
+  EXPECT_NE(message.find("not task_actor"), std::string::npos) << message;
+
+  message = setup_error(resolve(
+      dir.path() / "r", {"eval.snapshot_file=" + (dir.path() / "missing.params").string()}));
+  EXPECT_NE(message.find("missing.params does not exist"), std::string::npos) << message;
+
+  message = setup_error(resolve(dir.path() / "r", {"eval.policy=oracle", "eval.continuous=true"}));
+  EXPECT_NE(message.find("--continuous"), std::string::npos) << message;
+}
+
+}  // namespace
+}  // namespace indrive::actor
