@@ -166,6 +166,27 @@ void Graph::reset() {
   num_nodes_ = 0;
 }
 
+Graph::Mark Graph::mark() const {
+  Mark m;
+  m.block = current_;
+  m.used = current_ < blocks_.size() ? blocks_[current_].used : 0;
+  m.nodes = num_nodes_;
+  m.tape = tape_.size();
+  return m;
+}
+
+void Graph::rewind(const Mark& mark) {
+  INDRIVE_CHECK_EQ(tape_.size(), mark.tape)
+      << "rewind() past recorded ops: only scratch work under NoGradGuard can be rewound";
+  INDRIVE_CHECK(mark.block <= current_ && num_nodes_ >= mark.nodes)
+      << "rewind() to a mark taken after a reset or a later mark";
+  high_water_ = std::max(high_water_, arena_used_bytes());
+  for (std::size_t i = mark.block; i < blocks_.size(); ++i) blocks_[i].used = 0;
+  if (mark.block < blocks_.size()) blocks_[mark.block].used = mark.used;
+  current_ = mark.block;
+  num_nodes_ = mark.nodes;
+}
+
 void Graph::release_memory() {
   reset();
   free_blocks();

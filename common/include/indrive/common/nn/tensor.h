@@ -148,6 +148,16 @@ class Graph {
   // Returns all arena memory to the system (e.g. after a one-off large step); the next step
   // allocates afresh. Every tensor of the graph must be dead: it implies reset().
   void release_memory();
+  // A position in the arena (see rewind()).
+  struct Mark {
+    std::size_t block = 0, used = 0, nodes = 0, tape = 0;
+  };
+  // The current position of the arena, to rewind to after a scratch computation.
+  Mark mark() const;
+  // Gives back everything allocated since `mark`, so that a long no-grad computation done in
+  // chunks (e.g. scoring many imagined states) reuses one chunk's memory. Every tensor created
+  // since `mark` must be dead, and no op may have been recorded since (checked).
+  void rewind(const Mark& mark);
   // True unless a NoGradGuard is active: ops record backward rules only when enabled.
   bool grad_enabled() const { return grad_enabled_; }
   // Bytes currently handed out by the arena (values, gradients, nodes).
