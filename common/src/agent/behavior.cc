@@ -86,12 +86,17 @@ Tensor ActorCritic::loss(const ImaginedTrajectory& traj, const std::vector<float
   INDRIVE_CHECK_EQ(static_cast<std::int64_t>(rewards.size()), rows);
   Tensor states = nn::stop_gradient(traj.state_features());  // (H * N, feat)
 
+  // The critic's logits of the H * N start states, recorded for the critic loss below; their
+  // values also serve the returns, so the critic runs once more only on the N last states.
+  Tensor logits = critic_(states);
   // Values of all H + 1 states, lambda-returns, cumulative-discount weights (no tape).
   std::vector<float> values, slow_values, returns, weights(rows);
   {
     nn::NoGradGuard no_grad;
-    Tensor v = nn::twohot_mean(critic_(traj.features));
+    Tensor v = nn::twohot_mean(nn::stop_gradient(logits));
     values.assign(v.values().begin(), v.values().end());
+    Tensor last = nn::twohot_mean(critic_(nn::slice(traj.features, rows, rows + n, 0)));
+    values.insert(values.end(), last.values().begin(), last.values().end());
     Tensor slow = nn::twohot_mean(slow_critic_(states));
     slow_values.assign(slow.values().begin(), slow.values().end());
   }
@@ -117,7 +122,6 @@ Tensor ActorCritic::loss(const ImaginedTrajectory& traj, const std::vector<float
                              nn::scale(entropy, config_.entropy));
   Tensor actor_loss = nn::scale(nn::sum(nn::mul(objective, weight)), -inv_rows);
   // Two-hot critic towards the returns, regularised towards the slow critic's values.
-  Tensor logits = critic_(states);
   Tensor ce = column(nn::twohot_cross_entropy(logits, nn::constant(Shape{rows}, returns)));
   Tensor reg = column(nn::twohot_cross_entropy(logits, nn::constant(Shape{rows}, slow_values)));
   Tensor critic_loss = nn::scale(

@@ -88,28 +88,50 @@ Tensor LatentDisagreement::loss(const Transitions& batch) {
 std::vector<float> LatentDisagreement::reward(Tensor feat, Tensor action, Tensor next_feat) {
   (void)next_feat;
   nn::NoGradGuard no_grad;
-  Tensor input = nn::concat({nn::stop_gradient(feat), action}, -1);
-  const std::int64_t n = input.dim(0);
-  std::vector<Tensor> preds;
-  for (int k = 0; k < members(); ++k) preds.push_back(predict(k, input));
-  const std::int64_t s = preds[0].dim(1);
+  nn::Graph& graph = nn::current_graph();
+  const std::int64_t n = feat.dim(0);
+  // Rows are scored in chunks whose activations are given back to the arena after each chunk:
+  // the K members' hidden layers and softmaxes over all H * N imagined states would otherwise
+  // take over a gigabyte that is written once and read once.
+  constexpr std::int64_t kChunkRows = 1024;
   std::vector<float> out(n);
+  std::vector<float> mean, var;
   const float inv_k = 1.0f / static_cast<float>(members());
-  for (std::int64_t i = 0; i < n; ++i) {
-    double total = 0.0;
-    for (std::int64_t d = 0; d < s; ++d) {
-      float mean = 0.0f;
-      for (const Tensor& p : preds) mean += p.data()[i * s + d];
-      mean *= inv_k;
-      float var = 0.0f;
+  std::vector<Tensor> preds(members());
+  for (std::int64_t r0 = 0; r0 < n; r0 += kChunkRows) {
+    const std::int64_t r1 = std::min(n, r0 + kChunkRows);
+    const nn::Graph::Mark mark = graph.mark();
+    Tensor input = nn::concat({nn::slice(feat, r0, r1, 0), nn::slice(action, r0, r1, 0)}, -1);
+    for (int k = 0; k < members(); ++k) preds[k] = predict(k, input);
+    const std::int64_t s = preds[0].dim(1);
+    mean.resize(s);
+    var.resize(s);
+    for (std::int64_t i = r0; i < r1; ++i) {
+      const std::int64_t row = (i - r0) * s;
+      // Per latent d: mean and population variance across the members, summed in member order.
+      std::fill(mean.begin(), mean.end(), 0.0f);
       for (const Tensor& p : preds) {
-        const float diff = p.data()[i * s + d] - mean;
-        var += diff * diff;
+        const float* pr = p.data() + row;
+        for (std::int64_t d = 0; d < s; ++d) mean[d] += pr[d];
       }
-      var *= inv_k;  // population variance across members
-      total += config_.disag_reward == DisagReward::kVariance ? var : std::sqrt(var);
+      for (std::int64_t d = 0; d < s; ++d) mean[d] *= inv_k;
+      std::fill(var.begin(), var.end(), 0.0f);
+      for (const Tensor& p : preds) {
+        const float* pr = p.data() + row;
+        for (std::int64_t d = 0; d < s; ++d) {
+          const float diff = pr[d] - mean[d];
+          var[d] += diff * diff;
+        }
+      }
+      double total = 0.0;
+      for (std::int64_t d = 0; d < s; ++d) {
+        const float v = var[d] * inv_k;
+        total += config_.disag_reward == DisagReward::kVariance ? v : std::sqrt(v);
+      }
+      out[i] = static_cast<float>(total / s);
     }
-    out[i] = static_cast<float>(total / s);
+    for (Tensor& p : preds) p = Tensor();
+    graph.rewind(mark);
   }
   return out;
 }

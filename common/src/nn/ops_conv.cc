@@ -37,7 +37,7 @@ bool parallel_images(const Grid& g, std::int64_t images) {
 void im2col(const Grid& g, const float* big, std::int64_t images, float* cols) {
   const std::int64_t patch = g.patch();
   const std::int64_t c = g.c;
-#pragma omp parallel for schedule(static) if (parallel_images(g, images))
+#pragma omp parallel for schedule(dynamic, 4) if (parallel_images(g, images))
   for (std::int64_t i = 0; i < images; ++i) {
     const float* img = big + i * g.hb * g.wb * c;
     for (std::int64_t sy = 0; sy < g.hs; ++sy)
@@ -66,7 +66,7 @@ void im2col(const Grid& g, const float* big, std::int64_t images, float* cols) {
 void col2im(const Grid& g, const float* cols, std::int64_t images, float* big) {
   const std::int64_t patch = g.patch();
   const std::int64_t c = g.c;
-#pragma omp parallel for schedule(static) if (parallel_images(g, images))
+#pragma omp parallel for schedule(dynamic, 4) if (parallel_images(g, images))
   for (std::int64_t i = 0; i < images; ++i) {
     float* img = big + i * g.hb * g.wb * c;
     for (std::int64_t sy = 0; sy < g.hs; ++sy)

@@ -1,4 +1,5 @@
 // Categorical distributions, two-hot regression and losses.
+#include <algorithm>
 #include <cmath>
 
 #include "indrive/common/nn/ops.h"
@@ -20,10 +21,15 @@ Shape grouped(const Shape& s, int classes) {
 
 // Identity gradient to in[0] (straight-through estimator).
 void straight_through_backward(Node& n) {
-  float* gp = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gp = detail::grad_for_write(n.in[0], &fresh);
   if (gp == nullptr) return;
   const float* gy = n.grad;
-  for (std::int64_t i = 0, e = n.shape.numel(); i < e; ++i) gp[i] += gy[i];
+  const std::int64_t count = n.shape.numel();
+  if (fresh)
+    std::copy_n(gy, count, gp);
+  else
+    for (std::int64_t i = 0; i < count; ++i) gp[i] += gy[i];
 }
 
 }  // namespace
@@ -141,12 +147,15 @@ namespace {
 
 // in[0] logits, in[1] targets (no gradient).
 void bce_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
   if (gx == nullptr) return;
   const float* x = n.in[0]->value;
   const float* t = n.in[1]->value;
-  for (std::int64_t i = 0, e = n.shape.numel(); i < e; ++i)
-    gx[i] += n.grad[i] * (1.0f / (1.0f + std::exp(-x[i])) - t[i]);
+  for (std::int64_t i = 0, e = n.shape.numel(); i < e; ++i) {
+    const float g = n.grad[i] * (1.0f / (1.0f + std::exp(-x[i])) - t[i]);
+    gx[i] = fresh ? g : gx[i] + g;
+  }
 }
 
 void squared_error_backward(Node& n) {

@@ -17,6 +17,15 @@ using detail::parallel_for;
 
 namespace {
 
+// gx = e when the gradient buffer is fresh (uninitialised), gx += e otherwise.
+template <typename E>
+void Put(Array& gx, const E& e, bool assign) {
+  if (assign)
+    gx = e;
+  else
+    gx += e;
+}
+
 enum BinaryKind : std::int64_t { kAdd, kSub, kMul, kDiv };
 
 // (rows, cols) view of an operand and whether each axis is broadcast (size 1 against > 1).
@@ -102,38 +111,62 @@ void binary_backward(Node& n) {
   Node* nb = n.in[1];
   const Operand a = operand(na, rows, cols);
   const Operand b = operand(nb, rows, cols);
-  float* ga = grad_of(na);
-  float* gb = grad_of(nb);
   const float* gy = n.grad;
   const float* y = n.value;
   const bool same = a.rstride == cols && b.rstride == cols && a.cstride == 1 && b.cstride == 1;
   if (same) {
+    // One pass per input, each assigning into a gradient buffer that nothing has written yet
+    // (saves zeroing it) or accumulating. When both inputs are the same node, the second pass
+    // finds the buffer written by the first and accumulates.
     const std::int64_t total = rows * cols;
-    parallel_for(total, [&](std::int64_t s, std::int64_t e) {
-      for (std::int64_t i = s; i < e; ++i) {
-        const float g = gy[i];
+    bool fresh_a = false;
+    float* ga = detail::grad_for_write(na, &fresh_a);
+    if (ga != nullptr) {
+      parallel_for(total, [&](std::int64_t s, std::int64_t e) {
+        const std::int64_t len = e - s;
+        Array g(ga + s, len);
+        const ConstArray up(gy + s, len);
         switch (kind) {
           case kAdd:
-            if (ga) ga[i] += g;
-            if (gb) gb[i] += g;
-            break;
           case kSub:
-            if (ga) ga[i] += g;
-            if (gb) gb[i] -= g;
+            Put(g, up, fresh_a);
             break;
           case kMul:
-            if (ga) ga[i] += g * b.p[i];
-            if (gb) gb[i] += g * a.p[i];
+            Put(g, up * ConstArray(b.p + s, len), fresh_a);
             break;
           default:
-            if (ga) ga[i] += g / b.p[i];
-            if (gb) gb[i] -= g * y[i] / b.p[i];
+            Put(g, up / ConstArray(b.p + s, len), fresh_a);
             break;
         }
-      }
-    });
+      });
+    }
+    bool fresh_b = false;
+    float* gb = detail::grad_for_write(nb, &fresh_b);
+    if (gb != nullptr) {
+      parallel_for(total, [&](std::int64_t s, std::int64_t e) {
+        const std::int64_t len = e - s;
+        Array g(gb + s, len);
+        const ConstArray up(gy + s, len);
+        switch (kind) {
+          case kAdd:
+            Put(g, up, fresh_b);
+            break;
+          case kSub:
+            Put(g, -up, fresh_b);
+            break;
+          case kMul:
+            Put(g, up * ConstArray(a.p + s, len), fresh_b);
+            break;
+          default:
+            Put(g, -(up * ConstArray(y + s, len) / ConstArray(b.p + s, len)), fresh_b);
+            break;
+        }
+      });
+    }
     return;
   }
+  float* ga = grad_of(na);
+  float* gb = grad_of(nb);
   // Broadcast case: accumulate with strides; broadcast axes sum up (serial, deterministic).
   for (std::int64_t r = 0; r < rows; ++r) {
     for (std::int64_t c = 0; c < cols; ++c) {
@@ -199,15 +232,6 @@ Tensor div(Tensor a, Tensor b) { return binary(kDiv, a, b); }
 // float parameters.
 
 namespace {
-
-// gx = e when the gradient buffer is fresh (uninitialised), gx += e otherwise.
-template <typename E>
-void Put(Array& gx, const E& e, bool assign) {
-  if (assign)
-    gx = e;
-  else
-    gx += e;
-}
 
 struct ScaleOp {
   static void Forward(ConstArray x, Array y, const float* p) { y = x * p[0]; }

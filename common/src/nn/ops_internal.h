@@ -29,7 +29,9 @@ inline constexpr std::int64_t kParallelMin = std::int64_t{1} << 16;
 inline constexpr std::int64_t kChunk = std::int64_t{1} << 14;
 
 // Calls fn(begin, end) over [0, n) in fixed chunks, in parallel when n is large. Chunk bounds do
-// not depend on the thread count, so results are identical for any number of threads.
+// not depend on the thread count, so results are identical for any number of threads. Chunks
+// are handed out dynamically: on a machine shared with other jobs a thread that was descheduled
+// then does less, instead of holding the others at the barrier.
 template <typename Fn>
 void parallel_for(std::int64_t n, Fn&& fn) {
   if (n < kParallelMin || omp_get_max_threads() == 1 || omp_in_parallel()) {
@@ -37,7 +39,7 @@ void parallel_for(std::int64_t n, Fn&& fn) {
     return;
   }
   const std::int64_t chunks = (n + kChunk - 1) / kChunk;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(dynamic, 1)
   for (std::int64_t c = 0; c < chunks; ++c) fn(c * kChunk, std::min(n, (c + 1) * kChunk));
 }
 
@@ -77,10 +79,15 @@ void gemm(Dst&& dst, const A& a, const B& b, bool accumulate) {
   }
   const bool by_rows = m >= 64 * threads || m >= n;
   const std::int64_t extent = by_rows ? m : n;
-  // Split on multiples of 16 so that each part keeps full SIMD panels.
-  const std::int64_t part = ((extent + threads - 1) / threads + 15) / 16 * 16;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int t = 0; t < threads; ++t) {
+  // A few parts per thread, handed out dynamically, so that a thread delayed by other jobs on
+  // the machine does not hold the rest at the barrier. Parts split on multiples of 16 so that
+  // each keeps full SIMD panels; every output element is computed by one part with the same
+  // code whichever thread runs it, so results do not depend on the schedule.
+  const std::int64_t parts =
+      std::max<std::int64_t>(1, std::min<std::int64_t>(4 * threads, extent / 64));
+  const std::int64_t part = ((extent + parts - 1) / parts + 15) / 16 * 16;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (std::int64_t t = 0; t < parts; ++t) {
     const std::int64_t begin = std::min(extent, t * part);
     const std::int64_t len = std::min(extent, begin + part) - begin;
     if (len <= 0) continue;

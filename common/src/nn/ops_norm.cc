@@ -22,7 +22,7 @@ void for_row_chunks(std::int64_t rows, std::int64_t cols, Fn&& fn) {
   const std::int64_t chunks = (rows + kNormChunkRows - 1) / kNormChunkRows;
   const bool parallel = rows * cols >= detail::kParallelMin && chunks > 1 &&
                         omp_get_max_threads() > 1 && !omp_in_parallel();
-#pragma omp parallel for schedule(static) if (parallel)
+#pragma omp parallel for schedule(dynamic, 1) if (parallel)
   for (std::int64_t c = 0; c < chunks; ++c)
     fn(c * kNormChunkRows, std::min(rows, (c + 1) * kNormChunkRows), c);
 }
@@ -180,38 +180,59 @@ Tensor layer_norm_silu(Tensor x, Tensor gamma, Tensor beta, float eps) {
 
 namespace {
 
+// Calls fn(r0, r1) over row ranges that together cover [0, rows); the ranges are whole rows of
+// the fixed element chunks of parallel_for, so they do not depend on the thread count.
+template <typename Fn>
+void for_rows(std::int64_t rows, std::int64_t cols, Fn&& fn) {
+  detail::parallel_for(rows * cols, [&](std::int64_t s, std::int64_t e) {
+    const std::int64_t r0 = (s + cols - 1) / cols, r1 = (e + cols - 1) / cols;
+    if (r0 < r1) fn(r0, r1);
+  });
+}
+
 void softmax_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
   if (gx == nullptr) return;
   const std::int64_t rows = n.shape.rows(), cols = n.shape.cols();
-  for (std::int64_t r = 0; r < rows; ++r) {
-    const float* y = n.value + r * cols;
-    const float* gy = n.grad + r * cols;
-    float dot = 0.0f;
-    for (std::int64_t c = 0; c < cols; ++c) dot += gy[c] * y[c];
-    float* g = gx + r * cols;
-    for (std::int64_t c = 0; c < cols; ++c) g[c] += y[c] * (gy[c] - dot);
-  }
+  for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* y = n.value + r * cols;
+      const float* gy = n.grad + r * cols;
+      float dot = 0.0f;
+      for (std::int64_t c = 0; c < cols; ++c) dot += gy[c] * y[c];
+      float* g = gx + r * cols;
+      if (fresh)
+        for (std::int64_t c = 0; c < cols; ++c) g[c] = y[c] * (gy[c] - dot);
+      else
+        for (std::int64_t c = 0; c < cols; ++c) g[c] += y[c] * (gy[c] - dot);
+    }
+  });
 }
 
 void log_softmax_backward(Node& n) {
-  float* gx = grad_of(n.in[0]);
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
   if (gx == nullptr) return;
   const std::int64_t rows = n.shape.rows(), cols = n.shape.cols();
-  for (std::int64_t r = 0; r < rows; ++r) {
-    const float* y = n.value + r * cols;
-    const float* gy = n.grad + r * cols;
-    float total = 0.0f;
-    for (std::int64_t c = 0; c < cols; ++c) total += gy[c];
-    float* g = gx + r * cols;
-    for (std::int64_t c = 0; c < cols; ++c) g[c] += gy[c] - std::exp(y[c]) * total;
-  }
+  for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* y = n.value + r * cols;
+      const float* gy = n.grad + r * cols;
+      float total = 0.0f;
+      for (std::int64_t c = 0; c < cols; ++c) total += gy[c];
+      float* g = gx + r * cols;
+      if (fresh)
+        for (std::int64_t c = 0; c < cols; ++c) g[c] = gy[c] - std::exp(y[c]) * total;
+      else
+        for (std::int64_t c = 0; c < cols; ++c) g[c] += gy[c] - std::exp(y[c]) * total;
+    }
+  });
 }
 
 // Writes softmax (or log-softmax) of each row of x into y.
 void softmax_rows(const float* x, float* y, std::int64_t rows, std::int64_t cols, bool log) {
-  detail::parallel_for(rows * cols, [&](std::int64_t s, std::int64_t e) {
-    const std::int64_t r0 = (s + cols - 1) / cols, r1 = (e + cols - 1) / cols;
+  for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
     for (std::int64_t r = r0; r < r1; ++r) {
       const float* xr = x + r * cols;
       float* yr = y + r * cols;

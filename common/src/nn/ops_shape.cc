@@ -40,11 +40,15 @@ void concat_backward(Node& n) {
   for (Node* part : n.in) {
     if (part == nullptr) break;
     const std::int64_t width = part->shape.dims[axis] * inner;
-    if (float* gp = grad_of(part)) {
+    bool fresh = false;
+    if (float* gp = detail::grad_for_write(part, &fresh)) {
       for (std::int64_t o = 0; o < outer; ++o) {
         const float* src = n.grad + o * total + offset;
         float* dst = gp + o * width;
-        for (std::int64_t i = 0; i < width; ++i) dst[i] += src[i];
+        if (fresh)
+          std::memcpy(dst, src, width * sizeof(float));
+        else
+          for (std::int64_t i = 0; i < width; ++i) dst[i] += src[i];
       }
     }
     offset += width;
@@ -76,9 +80,11 @@ Tensor concat_few(std::span<const Tensor> parts, int axis_in) {
     offset += width;
   }
   n->iparam[0] = axis;
-  g.record(n, concat_backward,
-           {parts[0].node(), parts.size() > 1 ? parts[1].node() : nullptr,
-            parts.size() > 2 ? parts[2].node() : nullptr});
+  // More than kMaxConcat parts only come here when no gradient is recorded.
+  if (parts.size() <= static_cast<std::size_t>(kMaxConcat))
+    g.record(n, concat_backward,
+             {parts[0].node(), parts.size() > 1 ? parts[1].node() : nullptr,
+              parts.size() > 2 ? parts[2].node() : nullptr});
   return Tensor(n);
 }
 
@@ -87,6 +93,12 @@ Tensor concat_few(std::span<const Tensor> parts, int axis_in) {
 Tensor concat(std::span<const Tensor> parts, int axis) {
   INDRIVE_CHECK(!parts.empty()) << "concat of nothing";
   if (parts.size() <= static_cast<std::size_t>(kMaxConcat)) return concat_few(parts, axis);
+  bool needs_grad = false;
+  for (const Tensor& p : parts) needs_grad = needs_grad || p.requires_grad();
+  if (!needs_grad || !current_graph().grad_enabled()) {
+    // Nothing to record (e.g. imagination under no-grad): one copy into the result.
+    return concat_few(parts, axis);
+  }
   // Long lists (e.g. 64 time steps): concatenate in a balanced tree of small nodes, so the
   // copy cost stays O(n log n) and each node keeps its fixed input slots.
   std::vector<Tensor> level(parts.begin(), parts.end());

@@ -3,11 +3,17 @@
 #include "indrive/common/nn/tensor.h"
 
 #include <omp.h>
+#include <sys/mman.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <sstream>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "indrive/common/check.h"
 
@@ -64,25 +70,68 @@ float Tensor::item() const {
 namespace {
 constexpr std::size_t kAlign = 64;
 constexpr std::size_t kMinBlock = std::size_t{16} << 20;
+// Blocks are aligned to and sized in 2 MiB units so that the kernel can back them with huge
+// pages: a training step writes hundreds of MiB of fresh activations, and small pages would
+// cost one fault (and one TLB entry) per 4 KiB.
+constexpr std::size_t kHugePage = std::size_t{2} << 20;
 
-std::size_t round_up(std::size_t n) { return (n + kAlign - 1) & ~(kAlign - 1); }
+std::size_t round_up(std::size_t n, std::size_t to = kAlign) { return (n + to - 1) / to * to; }
+
+std::byte* system_alloc(std::size_t bytes) {
+  void* p = std::aligned_alloc(kHugePage, bytes);
+  INDRIVE_CHECK(p != nullptr) << "out of memory: the graph arena needs " << (bytes >> 20)
+                              << " MiB more";
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  madvise(p, bytes, MADV_HUGEPAGE);  // advice only: failure just means small pages
+#endif
+  return static_cast<std::byte*>(p);
+}
+
+// Eigen's GEMM mallocs its packing buffers (about 1 MiB) on every product, on whichever thread
+// runs it. With the default policy glibc hands such sizes back to the system on free (munmap,
+// or trimming the top of a thread's heap), so every product faults its buffers in again. Keep
+// freed memory in the process instead: the buffers are then recycled.
+void keep_freed_memory() {
+#if defined(__GLIBC__)
+  static const bool once = [] {
+    mallopt(M_MMAP_THRESHOLD, 64 << 20);
+    mallopt(M_TRIM_THRESHOLD, 512 << 20);
+    return true;
+  }();
+  (void)once;
+#endif
+}
 }  // namespace
 
-Graph::Graph() { tape_.reserve(4096); }
-Graph::~Graph() = default;
+Graph::Graph() {
+  keep_freed_memory();
+  tape_.reserve(4096);
+}
+Graph::~Graph() { free_blocks(); }
+
+void Graph::free_blocks() {
+  for (Block& b : blocks_) std::free(b.memory);
+  blocks_.clear();
+  current_ = 0;
+}
 
 void* Graph::alloc_bytes(std::size_t bytes) {
   bytes = round_up(std::max<std::size_t>(bytes, 1));
-  if (blocks_.empty() || blocks_.back().used + bytes > blocks_.back().size) {
-    // A new block; reset() merges blocks so that the steady state uses a single one.
+  // Move on through the kept blocks until one has room; a step that repeats the previous one
+  // walks the same blocks with the same offsets.
+  while (current_ < blocks_.size() && blocks_[current_].used + bytes > blocks_[current_].size)
+    ++current_;
+  if (current_ == blocks_.size()) {
+    // Grow geometrically (each new block at least as large as all before it), so a step of
+    // any size needs few blocks.
     Block block;
-    block.size = std::max(bytes, std::max(kMinBlock, high_water_));
-    block.memory.reset(new (std::align_val_t(kAlign)) std::byte[block.size]);
+    block.size = round_up(std::max({bytes, kMinBlock, arena_capacity_bytes()}), kHugePage);
+    block.memory = system_alloc(block.size);
     ++system_allocations_;
-    blocks_.push_back(std::move(block));
+    blocks_.push_back(block);
   }
-  Block& b = blocks_.back();
-  void* p = b.memory.get() + b.used;
+  Block& b = blocks_[current_];
+  void* p = b.memory + b.used;
   b.used += bytes;
   return p;
 }
@@ -110,20 +159,38 @@ std::size_t Graph::arena_capacity_bytes() const {
 }
 
 void Graph::reset() {
-  const std::size_t used = arena_used_bytes();
-  high_water_ = std::max(high_water_, used);
-  if (blocks_.size() > 1) {
-    // Replace the chain by one block that holds a whole step, with some headroom.
-    blocks_.clear();
-    Block block;
-    block.size = round_up(high_water_ + high_water_ / 8);
-    block.memory.reset(new (std::align_val_t(kAlign)) std::byte[block.size]);
-    ++system_allocations_;
-    blocks_.push_back(std::move(block));
-  }
+  high_water_ = std::max(high_water_, arena_used_bytes());
   for (Block& b : blocks_) b.used = 0;
+  current_ = 0;
   tape_.clear();
   num_nodes_ = 0;
+}
+
+Graph::Mark Graph::mark() const {
+  Mark m;
+  m.block = current_;
+  m.used = current_ < blocks_.size() ? blocks_[current_].used : 0;
+  m.nodes = num_nodes_;
+  m.tape = tape_.size();
+  return m;
+}
+
+void Graph::rewind(const Mark& mark) {
+  INDRIVE_CHECK_EQ(tape_.size(), mark.tape)
+      << "rewind() past recorded ops: only scratch work under NoGradGuard can be rewound";
+  INDRIVE_CHECK(mark.block <= current_ && num_nodes_ >= mark.nodes)
+      << "rewind() to a mark taken after a reset or a later mark";
+  high_water_ = std::max(high_water_, arena_used_bytes());
+  for (std::size_t i = mark.block; i < blocks_.size(); ++i) blocks_[i].used = 0;
+  if (mark.block < blocks_.size()) blocks_[mark.block].used = mark.used;
+  current_ = mark.block;
+  num_nodes_ = mark.nodes;
+}
+
+void Graph::release_memory() {
+  reset();
+  free_blocks();
+  high_water_ = 0;
 }
 
 detail::Node* Graph::new_view_node(const Shape& shape, float* value) {

@@ -11,6 +11,8 @@
 // Prints seconds per update, the FLOP count used (GEMM and convolution multiply-adds x2; the
 // backward pass counted as twice the forward, except the input gradient of the first conv,
 // which is not computed) and GFLOP/s.
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -37,6 +39,13 @@ double process_cpu_seconds() {
   timespec ts;
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+// Minor page faults of the process so far: a step that reuses its memory makes almost none.
+double page_faults() {
+  rusage u;
+  getrusage(RUSAGE_SELF, &u);
+  return static_cast<double>(u.ru_minflt);
 }
 
 double median(std::vector<double> v) {
@@ -216,14 +225,15 @@ int main(int argc, char** argv) {
   std::vector<float> cont(static_cast<std::size_t>(rows), 1.0f);
 
   Graph& g = current_graph();
-  std::vector<double> times, fwd_times, cpu_times;
+  std::vector<double> times, fwd_times, cpu_times, faults;
   std::size_t allocations_after_warmup = 0;
   float last_loss = 0;
-  // Two warm-up updates: the first grows the arena, the reset after it merges the blocks.
+  // Two warm-up updates: the first grows the arena, later ones reuse its blocks.
   constexpr int kWarmup = 2;
   for (int i = 0; i < iters + kWarmup; ++i) {
     const auto t0 = Clock::now();
     const double cpu0 = process_cpu_seconds();
+    const double faults0 = page_faults();
     g.reset();
     Tensor loss = wm.loss(constant({rows, p.image, p.image, 3}, obs),
                           constant({rows, kActions}, act), constant({rows, 1}, cont), rng);
@@ -232,9 +242,10 @@ int main(int argc, char** argv) {
     adam.step();
     const double total = seconds_since(t0);
     const double cpu = process_cpu_seconds() - cpu0;
+    const double fault_count = page_faults() - faults0;
     last_loss = loss.item();
-    std::printf("update %d: %.3f s wall, %.3f s cpu%s\n", i, total, cpu,
-                i < kWarmup ? " (warm-up)" : "");
+    std::printf("update %d: %.3f s wall, %.3f s cpu, %.0f page faults%s\n", i, total, cpu,
+                fault_count, i < kWarmup ? " (warm-up)" : "");
     std::fflush(stdout);
     if (i < kWarmup) {
       allocations_after_warmup = g.arena_system_allocations();
@@ -243,17 +254,18 @@ int main(int argc, char** argv) {
     times.push_back(total);
     fwd_times.push_back(fwd);
     cpu_times.push_back(cpu);
+    faults.push_back(fault_count);
   }
   const double sec = median(times);
   const double flops = wm.flops();
   std::printf(
       "preset=%s params=%lld B=%d T=%d loss=%.3f\n"
       "sec_per_update=%.3f (forward %.3f, backward+adam %.3f) cpu_sec_per_update=%.3f "
-      "frames_per_sec=%.0f\n"
+      "page_faults_per_update=%.0f frames_per_sec=%.0f\n"
       "flops_per_update=%.3e achieved=%.1f GFLOP/s",
       p.name, static_cast<long long>(group.numel()), p.batch, p.seq, last_loss, sec,
-      median(fwd_times), sec - median(fwd_times), median(cpu_times), rows / sec, flops,
-      flops / sec / 1e9);
+      median(fwd_times), sec - median(fwd_times), median(cpu_times), median(faults), rows / sec,
+      flops, flops / sec / 1e9);
   if (peak > 0) std::printf(" = %.0f%% of gemm peak", 100.0 * flops / sec / 1e9 / peak);
   std::printf(
       "\narena=%.0f MB nodes=%zu arena_system_allocations: after warm-up %zu, after %d more "

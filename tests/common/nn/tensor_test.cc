@@ -3,8 +3,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <vector>
 
 #include "indrive/common/nn/nn.h"
 
@@ -103,6 +105,149 @@ TEST(GraphTest, SteadyStateStepsDoNotAllocate) {
   EXPECT_GT(g.num_nodes(), 10u);
   g.reset();
   EXPECT_EQ(g.arena_used_bytes(), 0u);
+}
+
+// A small model that touches every kind of op an agent update uses: conv encoder and decoder,
+// GRU, LayerNorm + SiLU, categorical sampling (softmax), concat and slice, losses and Adam.
+struct ReuseModel {
+  explicit ReuseModel(Rng& rng)
+      : group("m"),
+        enc(group, "enc", {.image = 16, .channels = 3, .depth = 4, .min_res = 4}, rng),
+        gru(group, "gru", enc.embed_dim() + 8 * 4, 16, rng),
+        post(group, "post", 16, {.units = 16, .layers = 1, .out = 8 * 4}, rng),
+        dec(group, "dec", 16, {.image = 16, .channels = 3, .depth = 4, .min_res = 4}, rng),
+        adam(group, {.lr = 1e-3f}) {}
+
+  // One training update on a fixed batch (4 steps of 2 images); returns the loss.
+  float update(Rng& rng) {
+    Graph& g = current_graph();
+    g.reset();
+    std::vector<float> pixels(8 * 16 * 16 * 3);
+    for (std::size_t i = 0; i < pixels.size(); ++i) pixels[i] = static_cast<float>(i % 7) / 7.0f;
+    Tensor images = constant({8, 16, 16, 3}, pixels);
+    Tensor embed = enc(images);
+    Tensor h = zeros({2, 16}), z = zeros({2, 8 * 4});
+    std::vector<Tensor> feats;
+    for (int t = 0; t < 4; ++t) {
+      h = gru(concat({slice(embed, 2 * t, 2 * t + 2, 0), z}, -1), h);
+      z = sample_straight_through(unimix_probs(post(h), 4), 4, rng);
+      feats.push_back(h);
+    }
+    Tensor recon = dec(concat(feats, 0));
+    Tensor loss = add(mse(recon, images), mean(entropy(reshape(softmax(z), {16, 4}))));
+    g.backward(loss);
+    adam.step();
+    return loss.item();
+  }
+
+  ParamGroup group;
+  ConvEncoder enc;
+  GruCell gru;
+  Mlp post;
+  ConvDecoder dec;
+  Adam adam;
+};
+
+// Fills every byte of the arena that the next step can get with NaN, so that an op reading
+// memory it did not write (relying on fresh pages being zero) changes the results.
+void poison_arena() {
+  Graph& g = current_graph();
+  g.reset();
+  constexpr std::int64_t kPiece = 64;  // floats; block sizes are multiples of this
+  while (g.arena_used_bytes() + kPiece * sizeof(float) <= g.arena_capacity_bytes())
+    std::fill_n(g.alloc(kPiece), kPiece, std::nanf(""));
+  g.reset();
+}
+
+// Losses of three updates and the parameters after them; `fresh` gives every update newly
+// mapped memory, otherwise the arena's kept blocks are reused (after poisoning them).
+std::vector<float> reuse_run(bool fresh) {
+  Rng rng(5);
+  ReuseModel model(rng);
+  std::vector<float> out;
+  for (int step = 0; step < 3; ++step) {
+    if (fresh)
+      current_graph().release_memory();
+    else
+      poison_arena();
+    out.push_back(model.update(rng));
+  }
+  for (const auto& p : model.group.params())
+    out.insert(out.end(), p->value().begin(), p->value().end());
+  current_graph().reset();
+  return out;
+}
+
+TEST(GraphTest, ReusedArenaGivesBitwiseTheResultsOfFreshMemory) {
+  const std::vector<float> fresh = reuse_run(true);
+  const std::vector<float> reused = reuse_run(false);
+  ASSERT_EQ(fresh.size(), reused.size());
+  for (float v : reused) ASSERT_TRUE(std::isfinite(v));
+  EXPECT_EQ(std::memcmp(fresh.data(), reused.data(), fresh.size() * sizeof(float)), 0);
+}
+
+TEST(GraphTest, ArenaKeepsItsBlocksAndAddressesAcrossUpdates) {
+  Rng rng(6);
+  ReuseModel model(rng);
+  Graph& g = current_graph();
+  g.release_memory();
+  model.update(rng);
+  const std::size_t allocations = g.arena_system_allocations();
+  const std::size_t capacity = g.arena_capacity_bytes();
+  const std::size_t used = g.arena_used_bytes();
+  EXPECT_GT(allocations, 0u);
+  for (int i = 0; i < 3; ++i) {
+    model.update(rng);
+    // The same step takes the same memory: the pool neither grows nor moves.
+    EXPECT_EQ(g.arena_system_allocations(), allocations);
+    EXPECT_EQ(g.arena_capacity_bytes(), capacity);
+    EXPECT_EQ(g.arena_used_bytes(), used);
+  }
+  g.reset();
+  const float* first = zeros({1000}).data();
+  g.reset();
+  EXPECT_EQ(zeros({1000}).data(), first);
+  // A step larger than everything kept adds blocks; a smaller one reuses the first ones.
+  g.reset();
+  g.alloc(static_cast<std::int64_t>(capacity));
+  EXPECT_GT(g.arena_system_allocations(), allocations);
+  const std::size_t grown = g.arena_capacity_bytes();
+  g.reset();
+  EXPECT_EQ(zeros({1000}).data(), first);
+  EXPECT_EQ(g.arena_capacity_bytes(), grown);
+  g.release_memory();
+  EXPECT_EQ(g.arena_capacity_bytes(), 0u);
+  EXPECT_EQ(g.arena_high_water_bytes(), 0u);
+}
+
+TEST(GraphTest, RewindGivesBackScratchMemoryOfNoGradWork) {
+  Graph& g = current_graph();
+  g.reset();
+  Tensor kept = full({4}, 2.0f);
+  float total = 0.0f;
+  const std::size_t used = g.arena_used_bytes();
+  const float* first_scratch = nullptr;
+  {
+    NoGradGuard no_grad;
+    for (int chunk = 0; chunk < 3; ++chunk) {
+      const Graph::Mark mark = g.mark();
+      // Larger than the first block, so the scratch spills into a second one.
+      Tensor scratch = add_scalar(full({5 << 20}, static_cast<float>(chunk)), kept.data()[0]);
+      if (chunk == 0) first_scratch = scratch.data();
+      EXPECT_EQ(scratch.data(), first_scratch);  // every chunk reuses the same memory
+      total += scratch.data()[123];
+      g.rewind(mark);
+      EXPECT_EQ(g.arena_used_bytes(), used);
+    }
+  }
+  EXPECT_EQ(total, 2.0f + 3.0f + 4.0f);
+  EXPECT_EQ(kept.data()[3], 2.0f);  // tensors from before the mark are untouched
+  // Recorded ops cannot be rewound: their backward rules would read freed memory.
+  const Graph::Mark mark = g.mark();
+  Tensor leaf = grad_leaf({2}, std::vector<float>{1.0f, 2.0f});
+  Tensor y = square(leaf);
+  EXPECT_DEATH(g.rewind(mark), "rewind");
+  g.reset();
 }
 
 // Forward and backward of a small conv + norm + linear model; returns the loss and all grads.

@@ -141,15 +141,31 @@ class Graph {
   // Runs reverse mode from a one-element loss: gradients accumulate into every tensor and
   // parameter the loss depends on. Call at most once per recorded graph.
   void backward(Tensor loss);
-  // Forgets every tensor of this step and rewinds the arena; memory is kept for the next step
-  // (after the first steps the arena is one block large enough for a whole step).
+  // Forgets every tensor of this step and rewinds the arena. Every block is kept (and so are its
+  // already-touched pages), so a step that repeats the previous step's allocations gets the
+  // same addresses and makes no system allocation and no page fault.
   void reset();
+  // Returns all arena memory to the system (e.g. after a one-off large step); the next step
+  // allocates afresh. Every tensor of the graph must be dead: it implies reset().
+  void release_memory();
+  // A position in the arena (see rewind()).
+  struct Mark {
+    std::size_t block = 0, used = 0, nodes = 0, tape = 0;
+  };
+  // The current position of the arena, to rewind to after a scratch computation.
+  Mark mark() const;
+  // Gives back everything allocated since `mark`, so that a long no-grad computation done in
+  // chunks (e.g. scoring many imagined states) reuses one chunk's memory. Every tensor created
+  // since `mark` must be dead, and no op may have been recorded since (checked).
+  void rewind(const Mark& mark);
   // True unless a NoGradGuard is active: ops record backward rules only when enabled.
   bool grad_enabled() const { return grad_enabled_; }
   // Bytes currently handed out by the arena (values, gradients, nodes).
   std::size_t arena_used_bytes() const;
   // Bytes the arena holds from the system.
   std::size_t arena_capacity_bytes() const;
+  // Largest arena_used_bytes() seen at a reset() since construction (or release_memory()).
+  std::size_t arena_high_water_bytes() const { return high_water_; }
   // Number of system allocations the arena has made since construction (for allocation tests).
   std::size_t arena_system_allocations() const { return system_allocations_; }
   // Number of nodes recorded since the last reset.
@@ -178,14 +194,18 @@ class Graph {
 
  private:
   friend class NoGradGuard;
+  // One system allocation of the arena; blocks are only freed by release_memory() or the
+  // destructor, never by reset(), so their pages stay mapped and touched between steps.
   struct Block {
-    std::unique_ptr<std::byte[]> memory;
+    std::byte* memory = nullptr;
     std::size_t size = 0;
     std::size_t used = 0;
   };
   void* alloc_bytes(std::size_t bytes);
+  void free_blocks();
 
   std::vector<Block> blocks_;
+  std::size_t current_ = 0;  // index of the block that allocations are served from
   std::size_t high_water_ = 0;
   std::size_t system_allocations_ = 0;
   std::size_t num_nodes_ = 0;
