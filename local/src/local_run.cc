@@ -223,6 +223,8 @@ struct LocalRun::Impl {
       if (seconds_since(last_log) >= log_interval_s) log_metrics();
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
     }
+    // A session that took no step (budget already reached) leaves the files of the last one.
+    if (coverage.steps() == 0) return;
     log_metrics();
     save_checkpoint();
     coverage.write_csv(run.path() / "coverage.csv");

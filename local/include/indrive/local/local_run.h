@@ -52,7 +52,8 @@ class LocalRun {
   void on_progress(std::function<void(const std::string&)> callback);
   // Acts and trains until run.budget_env_steps env steps are done (0: no limit) or `stop` is
   // set; writes metrics.jsonl lines every learner.log_interval_s, a checkpoint every
-  // learner.checkpoint_minutes and at the end, and coverage.csv at the end.
+  // learner.checkpoint_minutes and at the end, and coverage.csv (the steps of this process) at
+  // the end. A run whose budget is already reached returns at once and rewrites nothing.
   void train(const std::atomic<bool>& stop);
   // Writes a checkpoint of the agent and the counters now (learner checkpoint format).
   void save_checkpoint();
