@@ -33,8 +33,17 @@ RunDir open_run(const actor::ServiceConfig& config) {
 }
 
 // The agent's config for this process: random mode never leaves prefill, so it never trains.
+// A finetune without a checkpoint to start from is refused here, before SUMO starts.
 agent::AgentConfig local_agent_config(const actor::ServiceConfig& config) {
   agent::AgentConfig agent = config.agent();
+  const bool resumable = CheckpointFiles(open_run(config).checkpoints(), 1000).newest().has_value();
+  if (agent.phase == agent::Phase::kFinetune && !config.config().get<bool>("local.random") &&
+      !resumable && config.config().get<std::string>("learner.init_checkpoint").empty()) {
+    throw LocalRunError(
+        "finetune needs a pretrained agent: set learner.init_checkpoint to a pretraining "
+        "run's checkpoint, e.g. --set learner.init_checkpoint=runs/<run>/checkpoints/"
+        "ckpt-000000000100.bin");
+  }
   if (config.config().get<bool>("local.random")) {
     agent.replay.prefill = std::numeric_limits<std::int64_t>::max();
   }
@@ -120,11 +129,6 @@ struct LocalRun::Impl {
       with_staged_agent(run.checkpoints(), agent_bytes,
                         [this](const fs::path& dir) { trainer.load(dir); });
       INDRIVE_LOG(kInfo, "local") << "initialised from " << init;
-    } else if (agent_config.phase == agent::Phase::kFinetune && !random) {
-      throw LocalRunError(
-          "finetune needs a pretrained agent: set learner.init_checkpoint to a pretraining "
-          "run's checkpoint, e.g. --set learner.init_checkpoint=runs/<run>/checkpoints/"
-          "ckpt-000000000100.bin");
     }
     ++base.learner_epoch;
   }

@@ -128,8 +128,8 @@ TEST(CoverageCsvTest, RoundTripMergesFilesAndRejectsBadRows) {
       {dir.path() / "coverage" / "actor-0.csv", dir.path() / "coverage" / "actor-1.csv"});
   EXPECT_EQ(counts.steps, 6);
   EXPECT_EQ(counts.windows, 3);
-  // Windows: first (2, 1), second (2): mean 5/3.
-  EXPECT_NEAR(counts.distinct_per_1k, 5.0 / 3.0, 1e-6);
+  // Windows of 2 steps: first {piece 0} and {piece 1}, second {piece 1, piece 2}: (1 + 1 + 2) / 3.
+  EXPECT_NEAR(counts.distinct_per_1k, 4.0 / 3.0, 1e-6);
   EXPECT_DOUBLE_EQ(counts.segment_m, 10.0);
   std::map<int, std::int64_t> by_piece;
   for (std::size_t i = 0; i < counts.pieces.size(); ++i) {

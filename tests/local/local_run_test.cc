@@ -7,6 +7,7 @@
 //   - the world model's reconstruction loss falls: mean of the last quarter of the metrics lines
 //     <= kFallRatio x mean of the first quarter (pretraining), and likewise the reward head's
 //     loss in finetuning;
+//   - the intrinsic module's loss falls too, more loosely (<= kIntrinsicFallRatio);
 //   - the intrinsic reward (expl/reward) is finite and not identically zero;
 //   - a reload gives bitwise-identical parameters and the same counters, and training continues
 //     the counters (env steps and updates keep rising, metrics.jsonl continues past them);
@@ -14,6 +15,7 @@
 #include "indrive/local/local_run.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <atomic>
 #include <cmath>
@@ -29,15 +31,25 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr std::int64_t kPretrainSteps = 2000;
+constexpr std::int64_t kPretrainSteps = 1500;
 constexpr double kFallRatio = 0.8;
+// The intrinsic modules chase targets that move while the world model learns, so their losses
+// fall more slowly (measured: icm 0.88, rnd 0.32, disag 0.86 of the first quarter).
+constexpr double kIntrinsicFallRatio = 0.95;
+
+// One OpenMP thread: on a shared two-core machine the tiny model's parallel regions cost more in
+// synchronisation than they save (measured about 20x slower updates under load).
+[[maybe_unused]] const bool kOneThread = [] {
+  omp_set_num_threads(1);
+  return true;
+}();
 
 actor::ServiceConfig make_config(const fs::path& run_dir, std::vector<std::string> overrides) {
   std::vector<std::string> all = {"run.seed=0",
                                   "env.town=town01",
                                   "env.densities=5",
                                   "env.time_limit_steps=300",
-                                  "agent.replay.prefill=400",
+                                  "agent.replay.prefill=300",
                                   "learner.replay_ratio=16",
                                   "learner.snapshot_every=5",
                                   "learner.log_interval_s=0.1",
@@ -82,16 +94,19 @@ void expect_all_finite(const std::vector<nlohmann::json>& lines) {
   for (const auto& line : lines) {
     EXPECT_EQ(line.value("non_finite_metrics", -1), 0) << line.dump();
     for (const auto& [key, value] : line.items()) {
-      if (value.is_number()) EXPECT_TRUE(std::isfinite(value.get<double>())) << key;
+      if (value.is_number()) {
+        EXPECT_TRUE(std::isfinite(value.get<double>())) << key;
+      }
     }
   }
 }
 
-void expect_falls(const std::vector<nlohmann::json>& lines, const std::string& key) {
+void expect_falls(const std::vector<nlohmann::json>& lines, const std::string& key,
+                  double ratio = kFallRatio) {
   const auto values = column(lines, key);
   ASSERT_GE(values.size(), 8u) << "too few metrics lines with " << key;
   const auto [first, last] = quarter_means(values);
-  EXPECT_LE(last, kFallRatio * first) << key << ": first quarter " << first << ", last " << last;
+  EXPECT_LE(last, ratio * first) << key << ": first quarter " << first << ", last " << last;
   std::printf("%s: first-quarter mean %.4g, last-quarter mean %.4g over %zu lines\n", key.c_str(),
               first, last, values.size());
 }
@@ -126,6 +141,7 @@ std::vector<nlohmann::json> pretrain(const fs::path& run_dir, const std::string&
   const auto lines = read_metrics(run_dir);
   expect_all_finite(lines);
   expect_falls(lines, "wm/recon");
+  expect_falls(lines, "intrinsic/loss", kIntrinsicFallRatio);
   const auto rewards = column(lines, "expl/reward");
   EXPECT_FALSE(rewards.empty());
   double magnitude = 0.0;
@@ -212,8 +228,12 @@ TEST(LocalRunSmokeTest, PretrainWithDisagResumesAndFinetunesLaneFollowing) {
   expect_all_finite(lines);
   expect_falls(lines, "wm/reward");
   EXPECT_FALSE(column(lines, "task/critic_loss").empty());
+}
 
-  // A finetune without a checkpoint to start from is refused with a clear error.
+// A finetune without a checkpoint to start from is refused with a clear error, before SUMO
+// starts.
+TEST(LocalRunTest, FinetuneWithoutACheckpointIsRefused) {
+  testing::TempDir dir;
   EXPECT_THROW(
       LocalRun(make_config(dir.path() / "orphan", {"agent.phase=finetune", "env.route=straight"})),
       LocalRunError);
