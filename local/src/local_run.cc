@@ -14,6 +14,7 @@
 #include "indrive/common/episode_csv.h"
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
+#include "indrive/envserver/town.h"
 #include "indrive/learner/learner.h"
 
 namespace indrive::local {
@@ -78,6 +79,32 @@ learner::LearnerCounters read_checkpoint(const fs::path& path,
   }
 }
 
+// The environment, started on the first reset: a run that only reloads or reports never
+// starts SUMO (libsumo allows one simulation per process).
+class LazyEnvironment : public agent::Environment {
+ public:
+  LazyEnvironment(const actor::ServiceConfig& config,
+                  std::function<void(const env::StepResult&)> observer)
+      : config_(config), observer_(std::move(observer)) {}
+
+  agent::EnvStep reset() override {
+    if (!adapter_) {
+      env_ = std::make_unique<env::Env>(config_.env());
+      adapter_ =
+          std::make_unique<actor::EnvAdapter>(*env_, actor::EnvAdapter::options_from(config_));
+      adapter_->on_result(observer_);
+    }
+    return adapter_->reset();
+  }
+  agent::EnvStep step(int action) override { return adapter_->step(action); }
+
+ private:
+  const actor::ServiceConfig& config_;
+  std::function<void(const env::StepResult&)> observer_;
+  std::unique_ptr<env::Env> env_;
+  std::unique_ptr<actor::EnvAdapter> adapter_;
+};
+
 std::string method_name(const actor::ServiceConfig& config, const agent::AgentConfig& agent) {
   if (config.config().get<bool>("local.random")) return "random";
   if (agent.phase == agent::Phase::kDreamer) return "dreamer";
@@ -93,11 +120,11 @@ struct LocalRun::Impl {
         random(service.config().get<bool>("local.random")),
         run(open_run(service)),
         checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
-        env(std::make_unique<env::Env>(service.env())),
-        adapter(*env, actor::EnvAdapter::options_from(service)),
-        coverage(env->town().net,
-                 {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
-        trainer(agent_config, adapter,
+        town(env::load_town(service.env().town, service.env().town_options)),
+        coverage(town.net, {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
+        environment(service,
+                    [this](const env::StepResult& result) { coverage.observe(result.ego.pose); }),
+        trainer(agent_config, environment,
                 {.train_ratio = service.config().get<double>("learner.replay_ratio"),
                  .snapshot_every = service.config().get<int>("learner.snapshot_every")}),
         metrics(run.metrics_path()) {
@@ -106,7 +133,6 @@ struct LocalRun::Impl {
     log_interval_s = c.get<double>("learner.log_interval_s");
     checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
     c.write_yaml(run.config_path());
-    adapter.on_result([this](const env::StepResult& result) { coverage.observe(result.ego.pose); });
     resume();
   }
 
@@ -244,9 +270,9 @@ struct LocalRun::Impl {
   bool random;
   RunDir run;
   CheckpointFiles checkpoints;
-  std::unique_ptr<env::Env> env;
-  actor::EnvAdapter adapter;
+  env::Town town;  // for coverage; the Env loads its own copy when it starts
   env::CoverageTracker coverage;
+  LazyEnvironment environment;
   agent::LocalTrainer trainer;
   MetricsLog metrics;
   learner::LearnerCounters base;
