@@ -69,7 +69,8 @@ for line in open(sys.argv[1]):
     if line:
         d=json.loads(line)
         if sys.argv[2] in d: v=d[sys.argv[2]]
-print("n/a" if v is None else ("%.4g" % v))' "$1/metrics.jsonl" "$2"
+scale=float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
+print("n/a" if v is None else ("%.4g" % (v * scale)))' "$1/metrics.jsonl" "$2" "${3:-1}"
 }
 newest_checkpoint() { ls "$1"/checkpoints/ckpt-*.bin | sort | tail -n 1; }
 
@@ -105,7 +106,7 @@ for run in random disag finetune-lf dreamer-lf; do
   "$bin/indrive" plot "$out/$run" > /dev/null || echo "(no plots for $run)"
 done
 
-sr() { sed -n 's/.*SR \([0-9.]*%\) (\([0-9]*\/[0-9]*\)).*/\1 (\2)/p' "$out/$1/evaluation.txt"; }
+sr() { sed -n 's/^evaluation [^ ]* [^ ]*: //p' "$out/$1/evaluation.txt"; }
 {
   echo
   echo "exploration on $town, $explore_steps env steps each ($preset preset, seed $seed)"
@@ -113,14 +114,14 @@ sr() { sed -n 's/.*SR \([0-9.]*%\) (\([0-9]*\/[0-9]*\)).*/\1 (\2)/p' "$out/$1/ev
   printf '  %-40s %12s %12s\n' "distinct lane segments per 1k env steps" \
     "$(last_metric "$out/random" coverage_distinct_per_1k)" \
     "$(last_metric "$out/disag" coverage_distinct_per_1k)"
-  printf '  %-40s %12s %12s\n' "fraction of the town's segments visited" \
-    "$(last_metric "$out/random" coverage_fraction_visited)" \
-    "$(last_metric "$out/disag" coverage_fraction_visited)"
+  printf '  %-40s %12s %12s\n' "% of the town's segments visited" \
+    "$(last_metric "$out/random" coverage_fraction_visited 100)" \
+    "$(last_metric "$out/disag" coverage_fraction_visited 100)"
   echo
   echo "lane following on $route, $task_steps task env steps, $eval_episodes episode(s) per density [$eval_densities]"
-  printf '  %-40s %s\n' "finetune from disag pretraining" "SR $(sr finetune-lf)"
-  printf '  %-40s %s\n' "dreamer from scratch" "SR $(sr dreamer-lf)"
-  printf '  %-40s %s\n' "random policy (reference)" "SR $(sr random)"
+  printf '  %-34s %s\n' "finetune from disag pretraining" "$(sr finetune-lf)"
+  printf '  %-34s %s\n' "dreamer from scratch" "$(sr dreamer-lf)"
+  printf '  %-34s %s\n' "random policy (reference)" "$(sr random)"
   echo
   echo "coverage maps: $out/{random,disag}/plots/coverage_map.png"
 } | tee "$out/summary.txt"
