@@ -68,7 +68,7 @@ CoverageTracker::CoverageTracker(const RoadNetwork& net, CoverageOptions options
 }
 
 void CoverageTracker::observe(const Pose2& pose) {
-  const std::int64_t window = steps_ / options_.window_steps;
+  const std::int64_t window = session_steps_ / options_.window_steps;
   if (const auto piece = segments_.locate(pose)) {
     ++visits_[*piece];
     if (last_window_[*piece] != window) {
@@ -77,20 +77,32 @@ void CoverageTracker::observe(const Pose2& pose) {
     }
   }
   ++steps_;
-  if (steps_ % options_.window_steps == 0) {
+  ++session_steps_;
+  if (session_steps_ % options_.window_steps == 0) {
     window_scores_.push_back(current_distinct_);
     current_distinct_ = 0;
   }
 }
 
 double CoverageTracker::distinct_per_window() const {
-  if (!window_scores_.empty()) {
-    double sum = 0.0;
+  if (!window_scores_.empty() || restored_windows_ > 0) {
+    double sum = restored_window_sum_;
     for (const int score : window_scores_) sum += score;
-    return sum / static_cast<double>(window_scores_.size());
+    return sum / static_cast<double>(window_scores_.size() + restored_windows_);
   }
-  if (steps_ == 0) return 0.0;
-  return current_distinct_ * static_cast<double>(options_.window_steps) / steps_;
+  if (session_steps_ == 0) return restored_partial_;
+  return current_distinct_ * static_cast<double>(options_.window_steps) / session_steps_;
+}
+
+void CoverageTracker::restore(const CoverageCounts& counts) {
+  for (std::size_t i = 0; i < counts.pieces.size(); ++i) {
+    const int piece = segments_.find(counts.pieces[i].first, counts.pieces[i].second);
+    if (piece >= 0) visits_[piece] += counts.visits[i];
+  }
+  steps_ += counts.steps;
+  restored_windows_ += counts.windows;
+  restored_window_sum_ += counts.distinct_per_1k * static_cast<double>(counts.windows);
+  if (counts.windows == 0) restored_partial_ = counts.distinct_per_1k;
 }
 
 int CoverageTracker::segments_visited() const {
@@ -104,7 +116,7 @@ double CoverageTracker::fraction_visited() const {
 
 void CoverageTracker::write_csv(const std::filesystem::path& path) const {
   std::ostringstream out;
-  out << "# steps=" << steps_ << " windows=" << window_scores_.size()
+  out << "# steps=" << steps_ << " windows=" << window_scores_.size() + restored_windows_
       << " distinct_per_1k=" << distinct_per_window() << " fraction_visited=" << fraction_visited()
       << " segments=" << segments_.count() << " segment_m=" << segments_.segment_m() << "\n";
   out << "lane,piece,visits\n";

@@ -142,6 +142,7 @@ struct LocalRun::Impl {
       base = read_checkpoint(*newest, agent_bytes);
       with_staged_agent(run.checkpoints(), agent_bytes,
                         [this](const fs::path& dir) { trainer.load(dir); });
+      restore_coverage();
       INDRIVE_LOG(kInfo, "local") << "resumed from " << newest->string() << " at " << base.env_steps
                                   << " env steps, " << base.updates << " updates";
     } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
@@ -157,6 +158,20 @@ struct LocalRun::Impl {
       INDRIVE_LOG(kInfo, "local") << "initialised from " << init;
     }
     ++base.learner_epoch;
+  }
+
+  // A resumed run continues the coverage of its earlier sessions (coverage.csv).
+  void restore_coverage() {
+    const fs::path file = run.path() / "coverage.csv";
+    if (!fs::exists(file)) return;
+    const env::CoverageCounts counts = env::read_coverage_csv({file});
+    if (counts.segment_m != coverage.options().segment_m) {
+      INDRIVE_LOG(kWarn, "local") << "coverage.csv has " << counts.segment_m
+                                  << " m segments, this run " << coverage.options().segment_m
+                                  << " m: coverage starts afresh";
+      return;
+    }
+    coverage.restore(counts);
   }
 
   std::int64_t env_steps() const { return base.env_steps + trainer.counters().env_steps; }
@@ -254,7 +269,7 @@ struct LocalRun::Impl {
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
     }
     // A session that took no step (budget already reached) leaves the files of the last one.
-    if (coverage.steps() == 0) return;
+    if (trainer.counters().env_steps == 0) return;
     log_metrics();
     save_checkpoint();
     coverage.write_csv(run.path() / "coverage.csv");

@@ -2,11 +2,10 @@
 // the service processes, for debugging, the end-to-end smoke test and the exploration study.
 //
 //   indrive-train-local --config deploy/configs/pretrain_disag.yaml --run-dir runs/local-disag
-//   indrive-train-local --config deploy/configs/pretrain_disag.yaml --run-dir runs/local-random
-//   --random
-//   indrive-train-local --config deploy/configs/finetune_lf.yaml --run-dir runs/local-lf \
+//   indrive-train-local --config deploy/configs/pretrain_disag.yaml --run-dir runs/rnd --random
+//   indrive-train-local --config deploy/configs/finetune_lf.yaml --run-dir runs/local-lf
 //       --set learner.init_checkpoint=runs/local-disag/checkpoints/ckpt-000000015625.bin
-//   indrive-train-local --config deploy/configs/finetune_lf.yaml --run-dir runs/local-lf \
+//   indrive-train-local --config deploy/configs/finetune_lf.yaml --run-dir runs/local-lf
 //       --evaluate-episodes 10 --route straight
 // SIGINT / SIGTERM save a checkpoint and exit; running again resumes from it.
 #include <CLI/CLI.hpp>

@@ -147,6 +147,32 @@ TEST(CoverageCsvTest, RoundTripMergesFilesAndRejectsBadRows) {
   EXPECT_THROW(read_coverage_csv({dir.path() / "missing.csv"}), IoError);
 }
 
+TEST(CoverageCsvTest, RestoreContinuesVisitsStepsAndWindows) {
+  const RoadNetwork& net = town02().net;
+  testing::TempDir dir;
+  const int lane = long_lane(35.0);
+  CoverageTracker first(net, {.segment_m = 10.0, .window_steps = 2});
+  for (double s : {1.0, 12.0, 15.0, 15.0}) first.observe(net.lane_pose(lane, s));  // windows 2, 1
+  first.write_csv(dir.path() / "coverage.csv");
+
+  CoverageTracker resumed(net, {.segment_m = 10.0, .window_steps = 2});
+  resumed.restore(read_coverage_csv({dir.path() / "coverage.csv"}));
+  EXPECT_EQ(resumed.steps(), 4);
+  EXPECT_DOUBLE_EQ(resumed.distinct_per_window(), 1.5);
+  for (double s : {25.0, 31.0, 2.0}) resumed.observe(net.lane_pose(lane, s));  // window 2, part
+  EXPECT_EQ(resumed.steps(), 7);
+  EXPECT_DOUBLE_EQ(resumed.distinct_per_window(), (2.0 + 1.0 + 2.0) / 3.0);
+  const LaneSegments& segments = resumed.segments();
+  EXPECT_EQ(resumed.visits()[segments.segment(lane, 1.0)], 2);
+  EXPECT_EQ(resumed.visits()[segments.segment(lane, 15.0)], 3);
+  EXPECT_EQ(resumed.visits()[segments.segment(lane, 25.0)], 1);
+  EXPECT_EQ(resumed.segments_visited(), 4);
+  resumed.write_csv(dir.path() / "coverage.csv");
+  const CoverageCounts counts = read_coverage_csv({dir.path() / "coverage.csv"});
+  EXPECT_EQ(counts.steps, 7);
+  EXPECT_EQ(counts.windows, 3);
+}
+
 TEST(CoverageMapTest, DrawsVisitedPiecesInColour) {
   const RoadNetwork& net = town02().net;
   testing::TempDir dir;

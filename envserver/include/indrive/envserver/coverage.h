@@ -72,6 +72,17 @@ class LaneSegments {
   std::vector<int> lane_of_;  // per piece
 };
 
+// Visit counts read back from one or more coverage CSV files.
+struct CoverageCounts {
+  std::vector<std::pair<std::string, int>> pieces;  // (lane id, piece) per row, merged
+  std::vector<std::int64_t> visits;                 // per entry of `pieces`
+  std::int64_t steps = 0;                           // summed over files
+  std::int64_t windows = 0;                         // summed over files
+  double distinct_per_1k = 0.0;  // window-weighted mean over files (steps-weighted when no
+                                 // file has a complete window)
+  double segment_m = 10.0;       // of the first file
+};
+
 // Counts visits per lane piece and the distinct pieces per step window.
 class CoverageTracker {
  public:
@@ -80,12 +91,15 @@ class CoverageTracker {
 
   // Records one env step at `pose` (the ego's footprint centre and heading).
   void observe(const Pose2& pose);
+  // Continues from earlier counts (a resumed run's coverage file): their visits, steps and
+  // completed windows join this tracker's; new windows start at the next observed step.
+  void restore(const CoverageCounts& counts);
 
-  // Env steps observed.
+  // Env steps observed (restored ones included).
   std::int64_t steps() const { return steps_; }
   // Visits per piece (steps spent on it), indexed like LaneSegments.
   const std::vector<std::int64_t>& visits() const { return visits_; }
-  // Distinct pieces of each completed window, oldest first.
+  // Distinct pieces of each completed window observed by this tracker, oldest first.
   const std::vector<int>& window_scores() const { return window_scores_; }
   // The distinct-segments-per-window measure defined at the top of this file (0 before the
   // first step).
@@ -110,17 +124,10 @@ class CoverageTracker {
   std::vector<std::int64_t> last_window_;  // per piece: the last window that visited it
   int current_distinct_ = 0;
   std::int64_t steps_ = 0;
-};
-
-// Visit counts read back from one or more coverage CSV files.
-struct CoverageCounts {
-  std::vector<std::pair<std::string, int>> pieces;  // (lane id, piece) per row, merged
-  std::vector<std::int64_t> visits;                 // per entry of `pieces`
-  std::int64_t steps = 0;                           // summed over files
-  std::int64_t windows = 0;                         // summed over files
-  double distinct_per_1k = 0.0;  // window-weighted mean over files (steps-weighted when no
-                                 // file has a complete window)
-  double segment_m = 10.0;       // of the first file
+  std::int64_t session_steps_ = 0;  // steps observed here (window boundaries count from 0)
+  std::int64_t restored_windows_ = 0;
+  double restored_window_sum_ = 0.0;
+  double restored_partial_ = 0.0;  // measure of restored counts without a complete window
 };
 
 // Reads and merges coverage CSV files (visits of the same piece add up). Throws IoError when a

@@ -52,7 +52,7 @@ class LocalRun {
   void on_progress(std::function<void(const std::string&)> callback);
   // Acts and trains until run.budget_env_steps env steps are done (0: no limit) or `stop` is
   // set; writes metrics.jsonl lines every learner.log_interval_s, a checkpoint every
-  // learner.checkpoint_minutes and at the end, and coverage.csv (the steps of this process) at
+  // learner.checkpoint_minutes and at the end, and coverage.csv (continued across resumes) at
   // the end. A run whose budget is already reached returns at once and rewrites nothing.
   void train(const std::atomic<bool>& stop);
   // Writes a checkpoint of the agent and the counters now (learner checkpoint format).
@@ -63,7 +63,7 @@ class LocalRun {
   // Training updates of the whole run, resumed ones included.
   std::int64_t updates() const;
   agent::Agent& agent();
-  // Coverage of the env steps taken by this process (not of resumed ones).
+  // Coverage of the run: this process's env steps plus those of the coverage.csv it resumed.
   const env::CoverageTracker& coverage() const;
 
  private:
