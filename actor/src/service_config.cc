@@ -75,12 +75,18 @@ void declare_service_schema(config::Schema& schema) {
       .add_number_list("env.densities", {5, 10, 20}, "traffic densities to draw from", 0, 20)
       .add_int("env.density_period_steps", 10000, "env steps between density draws", 1)
       .add_int("env.time_limit_steps", 1000, "episode length limit in steps", 1)
-      .add_string("env.route", "",
-                  "route of the task phases; empty: random spawns without a route");
+      .add_string("env.route", "", "route of the task phases; empty: random spawns without a route")
+      .add_float("env.coverage_segment_m", 10.0,
+                 "length of the lane pieces the exploration coverage counts", 0.5);
   schema.add_int("actor.chunk_length", 64, "steps per TrajectoryChunk (L)", 1, 4096)
       .add_float("actor.heartbeat_s", 1.0, "seconds between heartbeats", 0.05)
       .add_float("actor.request_after_s", 2.0,
-                 "seconds an announced snapshot may be missing before it is re-requested", 0.1);
+                 "seconds an announced snapshot may be missing before it is re-requested", 0.1)
+      .add_float("actor.coverage_period_s", 60.0,
+                 "seconds between writes of the actor's coverage/actor-<id>.csv", 1.0);
+  schema.add_bool("local.random", false,
+                  "indrive-train-local acts randomly throughout and never trains (the "
+                  "exploration baseline)");
   schema
       .add_float("learner.replay_ratio", 32.0, "replayed steps per env step the learner keeps",
                  0.001)

@@ -12,6 +12,7 @@
 #include "indrive/common/dds.h"
 #include "indrive/common/log.h"
 #include "indrive/common/nn/nn.h"
+#include "indrive/envserver/coverage.h"
 
 namespace indrive::actor {
 namespace {
@@ -124,6 +125,10 @@ struct TrainingActor::Impl {
     density_period = service.config().get<std::int64_t>("env.density_period_steps");
     route = service.config().get<std::string>("env.route");
     env = std::make_unique<env::Env>(env_config);
+    coverage = std::make_unique<env::CoverageTracker>(
+        env->town().net,
+        env::CoverageOptions{.segment_m = service.config().get<double>("env.coverage_segment_m")});
+    coverage_period_s = service.config().get<double>("actor.coverage_period_s");
     INDRIVE_LOG(kInfo, "actor") << "actor " << id << " of run '" << service.run_id()
                                 << "' ready: town " << env_config.town << ", image "
                                 << agent_config.world_model.image << ", architecture '"
@@ -309,6 +314,8 @@ struct TrainingActor::Impl {
                          .policy_version = stats.policy_version});
         ++stats.env_steps;
         own_steps.store(stats.env_steps);
+        coverage->observe(result.ego.pose);
+        if (seconds_since(last_coverage_write) >= coverage_period_s) write_coverage();
         episode_return += reward.value_or(0.0f);
         if (complete) publish(builder.take(), stop);
         maybe_heartbeat("running");
@@ -323,12 +330,24 @@ struct TrainingActor::Impl {
       ++episode_id;
       // A stopped episode's open chunk is dropped: the learner never gets a partial chunk.
     }
+    write_coverage();
     heartbeat("stopping");
     stats.total_s = seconds_since(start);
     INDRIVE_LOG(kInfo, "actor") << "actor " << id << " stops: " << stats.env_steps << " steps, "
                                 << stats.chunks << " chunks, " << stats.episodes
                                 << " episodes, policy v" << stats.policy_version << ", waited "
                                 << stats.wait_s << " s of " << stats.total_s << " s";
+  }
+
+  // Writes coverage/actor-<id>.csv of the run atomically; a failure is logged, never fatal:
+  // coverage is a measurement, not part of training.
+  void write_coverage() {
+    last_coverage_write = Clock::now();
+    try {
+      coverage->write_csv(config.run_dir() / "coverage" / ("actor-" + std::to_string(id) + ".csv"));
+    } catch (const std::exception& error) {
+      INDRIVE_LOG(kWarn, "actor") << "cannot write coverage: " << error.what();
+    }
   }
 
   const ServiceConfig& config;
@@ -354,6 +373,9 @@ struct TrainingActor::Impl {
   std::unique_ptr<dds::Reader<msg::StepAllowance>> allowance_reader;
   std::unique_ptr<dds::Reader<msg::Heartbeat>> heartbeat_reader;
   std::unique_ptr<env::Env> env;
+  std::unique_ptr<env::CoverageTracker> coverage;
+  double coverage_period_s = 60.0;
+  Clock::time_point last_coverage_write = Clock::now();
   std::vector<double> densities;
   std::int64_t density_period = 10000;
   std::string route;

@@ -77,7 +77,8 @@ int main(int argc, char** argv) {
   fs::path plot_run;
   std::string plot_x = "env_steps";
   auto* plot_cmd = app.add_subcommand(
-      "plot", "draw learning curves of a run (metrics.jsonl) into <run>/plots/*.png");
+      "plot",
+      "draw learning curves (metrics.jsonl) and the coverage map of a run into <run>/plots/");
   plot_cmd->add_option("run", plot_run, "run directory")->required()->check(CLI::ExistingDirectory);
   plot_cmd->add_option("--x", plot_x, "metric on the x axis")->capture_default_str();
 
@@ -89,9 +90,20 @@ int main(int argc, char** argv) {
       return indrive::deploy::run_launch(launch);
     }
     if (*plot_cmd) {
-      const auto files =
-          indrive::deploy::plot_metrics(plot_run / "metrics.jsonl", plot_run / "plots", plot_x);
-      for (const auto& file : files) std::printf("%s\n", file.c_str());
+      const bool has_metrics = fs::exists(plot_run / "metrics.jsonl");
+      if (has_metrics) {
+        const auto files =
+            indrive::deploy::plot_metrics(plot_run / "metrics.jsonl", plot_run / "plots", plot_x);
+        for (const auto& file : files) std::printf("%s\n", file.c_str());
+      }
+      const auto map =
+          indrive::deploy::plot_coverage(plot_run, plot_run / "plots" / "coverage_map.png");
+      if (map) std::printf("%s\n", map->c_str());
+      if (!has_metrics && !map) {
+        throw std::runtime_error(plot_run.string() +
+                                 " has neither metrics.jsonl nor coverage files: is it a run "
+                                 "directory?");
+      }
       return 0;
     }
     if (*report_cmd) {

@@ -1,5 +1,7 @@
 #include "indrive/deploy/plot.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -12,6 +14,8 @@
 #include <sstream>
 
 #include "indrive/common/run_dir.h"
+#include "indrive/envserver/coverage.h"
+#include "indrive/envserver/town.h"
 
 namespace indrive::deploy {
 namespace {
@@ -213,6 +217,52 @@ std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& met
     written.push_back(path);
   }
   return written;
+}
+
+std::optional<std::filesystem::path> plot_coverage(const std::filesystem::path& run_dir,
+                                                   const std::filesystem::path& png_path) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> files;
+  if (fs::exists(run_dir / "coverage.csv")) files.push_back(run_dir / "coverage.csv");
+  if (fs::is_directory(run_dir / "coverage")) {
+    std::vector<fs::path> actors;
+    for (const auto& entry : fs::directory_iterator(run_dir / "coverage")) {
+      if (entry.path().extension() == ".csv") actors.push_back(entry.path());
+    }
+    std::sort(actors.begin(), actors.end());
+    files.insert(files.end(), actors.begin(), actors.end());
+  }
+  if (files.empty()) return std::nullopt;
+
+  // The training town of the run, as its resolved config names it.
+  std::string town_spec = "town01";
+  const fs::path config_path = run_dir / "config.yaml";
+  if (fs::exists(config_path)) {
+    try {
+      const YAML::Node config = YAML::LoadFile(config_path.string());
+      if (config["env"] && config["env"]["town"])
+        town_spec = config["env"]["town"].as<std::string>();
+    } catch (const YAML::Exception& error) {
+      throw IoError(config_path.string() + " is not readable YAML: " + error.what());
+    }
+  }
+  const env::Town town = env::load_town(town_spec);
+  const env::CoverageCounts counts = env::read_coverage_csv(files);
+  const env::LaneSegments segments(town.net, counts.segment_m);
+  int visited = 0;
+  for (std::size_t i = 0; i < counts.pieces.size(); ++i) {
+    if (counts.visits[i] > 0 &&
+        segments.find(counts.pieces[i].first, counts.pieces[i].second) >= 0) {
+      ++visited;
+    }
+  }
+  std::ostringstream title;
+  title << std::fixed << std::setprecision(1) << "coverage " << town.name << ": " << counts.steps
+        << " env steps, " << counts.distinct_per_1k << " distinct segments / 1k steps, "
+        << 100.0 * visited / std::max(1, segments.count()) << "% of " << segments.count()
+        << " segments (" << counts.segment_m << " m) visited";
+  env::draw_coverage(town.net, counts, png_path, title.str());
+  return png_path;
 }
 
 }  // namespace indrive::deploy

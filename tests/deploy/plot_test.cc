@@ -6,6 +6,8 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
+#include "indrive/envserver/coverage.h"
+#include "indrive/envserver/town.h"
 #include "testing.h"
 
 namespace indrive::deploy {
@@ -51,6 +53,32 @@ TEST(PlotMetrics, WritesOnePngPerNumericKeyAndToleratesACutLastLine) {
   ASSERT_EQ(files.size(), 1u);
   EXPECT_EQ(files[0].filename(), "wm_loss.png");
   EXPECT_FALSE(cv::imread(files[0].string()).empty());
+}
+
+TEST(CoverageMap, MergesActorFilesOfARunOnItsTrainingTown) {
+  testing::TempDir dir;
+  const auto run = dir.path() / "run";
+  std::filesystem::create_directories(run);
+  EXPECT_FALSE(plot_coverage(run, run / "plots" / "coverage_map.png").has_value());
+
+  std::ofstream(run / "config.yaml") << "env:\n  town: town02\n";
+  const env::Town town = env::load_town("town02");
+  int lane = 0;
+  while (town.net.lane(lane).internal || town.net.lane(lane).length_m < 30.0) ++lane;
+  for (int actor = 0; actor < 2; ++actor) {
+    env::CoverageTracker coverage(town.net);
+    for (int i = 0; i < 20; ++i) coverage.observe(town.net.lane_pose(lane, 1.5 * i));
+    coverage.write_csv(run / "coverage" / ("actor-" + std::to_string(actor) + ".csv"));
+  }
+  const auto png = plot_coverage(run, run / "plots" / "coverage_map.png");
+  ASSERT_TRUE(png.has_value());
+  const cv::Mat image = cv::imread(png->string());
+  ASSERT_FALSE(image.empty());
+  EXPECT_GT(image.cols, 300);
+
+  // A run whose config names a town that does not exist is an error naming it.
+  std::ofstream(run / "config.yaml") << "env:\n  town: no_such_town\n";
+  EXPECT_THROW(plot_coverage(run, run / "plots" / "coverage_map.png"), env::MapError);
 }
 
 }  // namespace

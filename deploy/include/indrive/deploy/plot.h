@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <nlohmann/json_fwd.hpp>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -50,5 +51,14 @@ std::vector<double> nice_ticks(double low, double high, int count);
 std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& metrics_jsonl,
                                                 const std::filesystem::path& out_dir,
                                                 const std::string& x_key = "env_steps");
+
+// Draws the coverage map of a run: the training town (env.town of <run>/config.yaml) with its
+// lane pieces coloured by visits, from <run>/coverage.csv (indrive-train-local) and
+// <run>/coverage/actor-*.csv (training actors), merged; the title states the town, the env
+// steps, the distinct lane segments per 1,000 steps and the fraction of the town visited.
+// Returns the PNG written, or nullopt when the run has no coverage files. Throws IoError or the
+// envserver's MapError when a file or the town cannot be read.
+std::optional<std::filesystem::path> plot_coverage(const std::filesystem::path& run_dir,
+                                                   const std::filesystem::path& png_path);
 
 }  // namespace indrive::deploy

@@ -1,0 +1,71 @@
+// The driving environment seen through the agent's minimal interface: env::Env episodes as
+// agent::Environment steps (class-id frames at the preset's image size, the task reward in task
+// phases, is_last / is_terminal), with the episode choices a training actor makes (a route or
+// random spawns, a density redrawn every density period, fresh traffic and spawn seeds per
+// episode, all from one seed).
+//
+//   env::Env env(service.env());
+//   EnvAdapter adapter(env, EnvAdapter::options_from(service));
+//   adapter.on_result([&](const env::StepResult& r) { coverage.observe(r.ego.pose); });
+//   LocalTrainer trainer(service.agent(), adapter);
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "indrive/actor/service_config.h"
+#include "indrive/common/agent/local_trainer.h"
+#include "indrive/envserver/env.h"
+
+namespace indrive::actor {
+
+// Episode choices of the adapter.
+struct EnvAdapterOptions {
+  std::string route;                     // empty: random spawns without a route (pretraining)
+  std::vector<double> densities = {10};  // drawn uniformly every density_period_steps
+  std::int64_t density_period_steps = 10000;
+  std::uint64_t seed = 0;  // seeds densities, traffic and spawns
+};
+
+class EnvAdapter : public agent::Environment {
+ public:
+  // The environment must outlive the adapter. Throws std::invalid_argument for an empty
+  // density list or a period below 1.
+  EnvAdapter(env::Env& env, EnvAdapterOptions options);
+  // The options a training actor of this run uses (env.route, env.densities,
+  // env.density_period_steps, run.seed).
+  static EnvAdapterOptions options_from(const ServiceConfig& config);
+
+  // Starts an episode with the next density and fresh seeds; returns its first frame.
+  agent::EnvStep reset() override;
+  // Applies action in [0, 9) and returns the next frame; the reward is the env's task reward
+  // (0 in pretraining).
+  agent::EnvStep step(int action) override;
+
+  // Calls `observer` with every env result (after each reset and step), e.g. for coverage.
+  void on_result(std::function<void(const env::StepResult&)> observer) {
+    observer_ = std::move(observer);
+  }
+  // The env result of the last reset or step.
+  const env::StepResult& last() const { return last_; }
+  // Frames returned so far (resets and steps), the unit of the density period.
+  std::int64_t frames() const { return frames_; }
+  int density() const { return density_; }
+
+ private:
+  agent::EnvStep convert(const env::StepResult& result);
+
+  env::Env& env_;
+  EnvAdapterOptions options_;
+  std::mt19937_64 rng_;
+  std::function<void(const env::StepResult&)> observer_;
+  env::StepResult last_;
+  std::int64_t frames_ = 0;
+  std::int64_t next_density_draw_ = 0;
+  int density_ = 10;
+};
+
+}  // namespace indrive::actor

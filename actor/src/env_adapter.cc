@@ -1,0 +1,58 @@
+#include "indrive/actor/env_adapter.h"
+
+#include <stdexcept>
+
+#include "indrive/common/check.h"
+
+namespace indrive::actor {
+
+EnvAdapter::EnvAdapter(env::Env& env, EnvAdapterOptions options)
+    : env_(env), options_(std::move(options)), rng_(options_.seed * 7919u + 17u) {
+  if (options_.densities.empty()) {
+    throw std::invalid_argument("env.densities is empty: give at least one of 0, 5, 10, 20");
+  }
+  if (options_.density_period_steps < 1) {
+    throw std::invalid_argument("env.density_period_steps must be at least 1");
+  }
+}
+
+EnvAdapterOptions EnvAdapter::options_from(const ServiceConfig& config) {
+  const auto& c = config.config();
+  return {.route = c.get<std::string>("env.route"),
+          .densities = c.get<std::vector<double>>("env.densities"),
+          .density_period_steps = c.get<std::int64_t>("env.density_period_steps"),
+          .seed = static_cast<std::uint64_t>(c.get<std::int64_t>("run.seed"))};
+}
+
+agent::EnvStep EnvAdapter::convert(const env::StepResult& result) {
+  last_ = result;
+  ++frames_;
+  if (observer_) observer_(result);
+  agent::EnvStep step;
+  step.frame.assign(result.observation.data, result.observation.data + result.observation.total());
+  step.reward = static_cast<float>(result.reward.value_or(0.0));
+  step.is_last = result.is_last;
+  step.is_terminal = result.is_terminal;
+  return step;
+}
+
+agent::EnvStep EnvAdapter::reset() {
+  // As the training actor: the density is redrawn every period, the seeds every episode.
+  if (frames_ >= next_density_draw_) {
+    density_ = static_cast<int>(options_.densities[rng_() % options_.densities.size()]);
+    next_density_draw_ += options_.density_period_steps;
+  }
+  const std::uint64_t traffic_seed = rng_() % 1000000u;
+  const std::uint64_t spawn_seed = rng_() % 1000000u;
+  return convert(env_.reset({.route = options_.route,
+                             .density = density_,
+                             .traffic_seed = traffic_seed,
+                             .spawn_seed = spawn_seed}));
+}
+
+agent::EnvStep EnvAdapter::step(int action) {
+  INDRIVE_CHECK(action >= 0 && action < agent::kNumActions) << "action " << action;
+  return convert(env_.step(action));
+}
+
+}  // namespace indrive::actor

@@ -1,0 +1,69 @@
+// indrive-train-local: one run of any phase in one process, with the flags and config keys of
+// the service processes, for debugging, the end-to-end smoke test and the exploration study.
+//
+//   indrive-train-local --config deploy/configs/pretrain_disag.yaml --run-dir runs/local-disag
+//   indrive-train-local --config deploy/configs/pretrain_disag.yaml --run-dir runs/rnd --random
+//   indrive-train-local --config deploy/configs/finetune_lf.yaml --run-dir runs/local-lf
+//       --set learner.init_checkpoint=runs/local-disag/checkpoints/ckpt-000000015625.bin
+//   indrive-train-local --config deploy/configs/finetune_lf.yaml --run-dir runs/local-lf
+//       --evaluate-episodes 10 --route straight
+// SIGINT / SIGTERM save a checkpoint and exit; running again resumes from it.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+
+#include "indrive/actor/process_cli.h"
+#include "indrive/common/log.h"
+#include "indrive/local/local_run.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"indrive-train-local: environment, replay and training in one process"};
+  indrive::actor::ServiceOptions options;
+  std::string log_level = "info";
+  bool random = false;
+  int evaluate_episodes = 0;
+  std::string route;
+  indrive::actor::add_service_options(app, options, log_level);
+  app.add_flag("--random", random,
+               "act randomly throughout and never train (same as --set "
+               "local.random=true)");
+  app.add_option("--evaluate-episodes", evaluate_episodes,
+                 "evaluate the newest checkpoint instead of training: this many episodes per "
+                 "density of eval.densities, with the protocol's seeds")
+      ->check(CLI::Range(1, 100000));
+  app.add_option("--route", route, "route to evaluate on (and to train on: sets env.route)");
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    indrive::log::set_level(indrive::log::parse_level(log_level));
+    if (random) options.overrides.push_back("local.random=true");
+    if (!route.empty()) options.overrides.push_back("env.route=" + route);
+    const auto& stop = indrive::actor::install_stop_signals();
+    const auto config = indrive::actor::ServiceConfig::resolve(options);
+    if (evaluate_episodes > 0) {
+      if (route.empty()) route = config.config().get<std::string>("env.route");
+      if (route.empty()) route = "straight";
+      const auto summary = indrive::local::evaluate_locally(config, route, evaluate_episodes, stop);
+      std::printf("evaluation %s %s: SR %.1f%% (%d/%d), route completion %.3f, %.1f steps\n",
+                  config.run_id().c_str(), route.c_str(), 100.0 * summary.success_rate,
+                  summary.successes, summary.episodes, summary.mean_route_completion,
+                  summary.mean_steps);
+      return 0;
+    }
+    indrive::local::LocalRun run(config);
+    run.on_progress([](const std::string& line) {
+      std::puts(line.c_str());
+      std::fflush(stdout);
+    });
+    run.train(stop);
+    std::printf(
+        "done %s: %lld env steps, %lld updates, coverage %.2f distinct segments per 1k "
+        "steps, %.2f%% of the town's segments\n",
+        config.run_id().c_str(), static_cast<long long>(run.env_steps()),
+        static_cast<long long>(run.updates()), run.coverage().distinct_per_window(),
+        100.0 * run.coverage().fraction_visited());
+    return 0;
+  } catch (const std::exception& error) {
+    INDRIVE_LOG(kError, "local") << "indrive-train-local failed: " << error.what();
+    return 1;
+  }
+}

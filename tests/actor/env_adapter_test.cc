@@ -1,0 +1,73 @@
+// The env::Env -> agent::Environment adapter on town01 with a 32 x 32 camera: frames, rewards,
+// episode ends, density periods and the result observer.
+#include "indrive/actor/env_adapter.h"
+
+#include <gtest/gtest.h>
+
+#include <set>
+
+namespace indrive::actor {
+namespace {
+
+env::EnvConfig small_env(const std::string& task) {
+  env::EnvConfig config;
+  config.town = "town01";
+  config.camera.width = 32;
+  config.camera.height = 32;
+  config.events.time_limit_steps = 40;
+  config.task = task;
+  return config;
+}
+
+TEST(EnvAdapterTest, FramesRewardsAndEpisodeEndsOfAPretrainingEnv) {
+  env::Env env(small_env(""));
+  EnvAdapter adapter(env, {.densities = {0, 5}, .density_period_steps = 50, .seed = 3});
+  int observed = 0;
+  adapter.on_result([&](const env::StepResult&) { ++observed; });
+  std::set<int> densities;
+  int episodes = 0;
+  agent::EnvStep step = adapter.reset();
+  densities.insert(adapter.density());
+  for (int i = 0; i < 300; ++i) {
+    ASSERT_EQ(step.frame.size(), 32u * 32u);
+    for (const std::uint8_t id : step.frame) ASSERT_LT(id, 8) << "not a class id";
+    EXPECT_EQ(step.reward, 0.0f) << "pretraining has no reward";
+    EXPECT_EQ(step.is_last, adapter.last().is_last);
+    EXPECT_EQ(step.is_terminal, adapter.last().is_terminal);
+    if (step.is_last) {
+      ++episodes;
+      step = adapter.reset();
+      densities.insert(adapter.density());
+    } else {
+      step = adapter.step(4);  // straight ahead, moderate throttle
+    }
+  }
+  EXPECT_EQ(observed, adapter.frames());
+  EXPECT_EQ(adapter.frames(), 301);
+  // Episodes end within the 40-step limit, and the density is redrawn across periods.
+  EXPECT_GE(episodes, 300 / 41);
+  EXPECT_EQ(densities, (std::set<int>{0, 5}));
+}
+
+TEST(EnvAdapterTest, TaskPhaseCarriesTheEnvReward) {
+  env::Env env(small_env("lane_following"));
+  EnvAdapter adapter(env, {.route = "straight", .densities = {0}, .seed = 1});
+  agent::EnvStep step = adapter.reset();
+  double total = 0.0;
+  for (int i = 0; i < 20 && !step.is_last; ++i) {
+    step = adapter.step(4);
+    ASSERT_TRUE(adapter.last().reward.has_value());
+    EXPECT_FLOAT_EQ(step.reward, static_cast<float>(*adapter.last().reward));
+    total += step.reward;
+  }
+  EXPECT_NE(total, 0.0);
+}
+
+TEST(EnvAdapterTest, RejectsUnusableOptions) {
+  env::Env env(small_env(""));
+  EXPECT_THROW(EnvAdapter(env, {.densities = {}}), std::invalid_argument);
+  EXPECT_THROW(EnvAdapter(env, {.density_period_steps = 0}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace indrive::actor
