@@ -1,0 +1,177 @@
+// The replay ratio with real processes (learner and two actors, tiny preset): it holds over a
+// run whatever the speed of the machine, and the async mode lifts it so that a slow learner
+// does not slow the actors down. Each test prints the figures it measured.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <cstdio>
+#include <fstream>
+#include <regex>
+
+#include "process_harness.h"
+#include "testing.h"
+
+namespace indrive {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+using testing::Child;
+using testing::ProcessWatch;
+using testing::SeenHeartbeat;
+using testing::wait_until;
+
+constexpr double kStepsPerUpdate = 8 * 16;  // tiny preset: batch 8 x length 16
+
+class ReplayRatioTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    domain_ = testing::unique_domain_id();
+    config_ = dir_.path() / "ratio.yaml";
+    std::ofstream(config_) << testing::tiny_service_config();
+  }
+
+  // A learner and two actors of run `run_id` with the same overrides.
+  struct Run {
+    fs::path run_dir;
+    std::unique_ptr<Child> learner, actor0, actor1;
+  };
+  Run start(const std::string& run_id, const std::vector<std::string>& overrides) {
+    Run run{.run_dir = dir_.path() / "runs" / run_id};
+    auto argv = [&](const std::string& program) {
+      return testing::service_args(program, config_, run.run_dir, domain_, profile_, overrides);
+    };
+    run.learner = std::make_unique<Child>(argv("indrive-learner"), log(run_id, "learner"));
+    for (int id : {0, 1}) {
+      auto args = argv("indrive-actor");
+      args.insert(args.end(), {"--id", std::to_string(id)});
+      (id == 0 ? run.actor0 : run.actor1) =
+          std::make_unique<Child>(args, log(run_id, "actor-" + std::to_string(id)));
+    }
+    return run;
+  }
+  fs::path log(const std::string& run_id, const std::string& name) const {
+    return dir_.path() / (run_id + "-" + name + ".log");
+  }
+  std::string logs(const std::string& run_id) const {
+    std::string text;
+    for (const char* name : {"learner", "actor-0", "actor-1"}) {
+      std::string body = testing::slurp(log(run_id, name));
+      if (body.size() > 6000) body = "...\n" + body.substr(body.size() - 6000);
+      text += std::string("----- ") + name + "\n" + body;
+    }
+    return text;
+  }
+  // Share of an actor's run time spent waiting at the allowance (its last log line).
+  double wait_share(const std::string& run_id, const std::string& actor) const {
+    const std::string text = testing::slurp(log(run_id, actor));
+    std::smatch match;
+    if (!std::regex_search(text, match, std::regex("waited ([-+.eE0-9]+) s of ([-+.eE0-9]+) s"))) {
+      return -1.0;
+    }
+    return std::stod(match[1]) / std::max(1e-9, std::stod(match[2]));
+  }
+
+  testing::TempDir dir_{"indrive-ratio"};
+  int domain_ = 0;
+  fs::path config_;
+  fs::path profile_ = testing::source_path("deploy/dds/single_host.xml");
+};
+
+TEST_F(ReplayRatioTest, HoldsWithinFivePercentOverARunWithTwoActors) {
+  constexpr std::int64_t kBudget = 2400;
+  constexpr double kRatio = 32.0;
+  Run run = start("limited", {"run.budget_env_steps=" + std::to_string(kBudget)});
+  // The learner ends the run by itself once the budget's updates are done.
+  ASSERT_EQ(run.learner->wait(150s), 0) << logs("limited");
+  run.actor0->signal(SIGTERM);
+  run.actor1->signal(SIGTERM);
+  EXPECT_EQ(run.actor0->wait(30s), 0) << logs("limited");
+  EXPECT_EQ(run.actor1->wait(30s), 0) << logs("limited");
+
+  // replayed / env steps at every metrics line: actors may run ahead of training by the slack
+  // and the steps in flight only, so from half the budget on every line is within 5%.
+  const auto lines = testing::read_metrics(run.run_dir / "metrics.jsonl");
+  ASSERT_GE(lines.size(), 3u);
+  double low = 1e9, high = 0.0;
+  int checked = 0;
+  for (const auto& line : lines) {
+    const double env_steps = line.value("env_steps", 0.0);
+    const double replayed = line.value("updates", 0.0) * kStepsPerUpdate;
+    if (env_steps < kBudget / 2) continue;
+    const double ratio = replayed / env_steps;
+    EXPECT_NEAR(ratio, kRatio, kRatio * 0.05) << line.dump();
+    low = std::min(low, ratio);
+    high = std::max(high, ratio);
+    ++checked;
+  }
+  EXPECT_GE(checked, 1);
+  const auto& last = lines.back();
+  const double final_ratio =
+      last.value("updates", 0.0) * kStepsPerUpdate / last.value("env_steps", 1.0);
+  EXPECT_NEAR(final_ratio, kRatio, kRatio * 0.05) << last.dump();
+  EXPECT_GE(last.value("env_steps", 0), kBudget);
+  std::printf(
+      "[figures] replay ratio over a %lld-step run with 2 actors: final %.3f (target %.1f, "
+      "%lld env steps, %lld updates), %.3f..%.3f over %d lines after half the budget; actors "
+      "waited %.0f%% and %.0f%% of their time\n",
+      static_cast<long long>(kBudget), final_ratio, kRatio,
+      static_cast<long long>(last.value("env_steps", 0)),
+      static_cast<long long>(last.value("updates", 0)), low, high, checked,
+      100.0 * wait_share("limited", "actor-0"), 100.0 * wait_share("limited", "actor-1"));
+}
+
+TEST_F(ReplayRatioTest, AsyncModeIsNotLimitedByASlowLearner) {
+  // Replay ratio 128 makes the learner the bottleneck: one update (8 x 16 steps) per env step.
+  struct Measured {
+    double steps_per_s = 0.0;
+    double ratio = 0.0;
+    double wait_share[2] = {0.0, 0.0};
+  };
+  auto measure = [&](const std::string& run_id, bool async) {
+    Measured out;
+    ProcessWatch watch(domain_, profile_);
+    Run run = start(run_id, {"learner.replay_ratio=128",
+                             std::string("learner.async=") + (async ? "true" : "false")});
+    // From the first update on (prefill done), env steps over a fixed window.
+    SeenHeartbeat first, second;
+    EXPECT_TRUE(wait_until(90s, [&] {
+      return watch.heartbeat(msg::ROLE_LEARNER, 0, first) && first.updates > 0;
+    })) << logs(run_id);
+    std::this_thread::sleep_for(8s);
+    EXPECT_TRUE(watch.heartbeat(msg::ROLE_LEARNER, 0, second));
+    out.steps_per_s = static_cast<double>(second.env_steps - first.env_steps) /
+                      std::max(1e-9, second.time_s - first.time_s);
+    out.ratio = static_cast<double>(second.updates) * kStepsPerUpdate /
+                std::max<double>(1.0, static_cast<double>(second.env_steps));
+    run.actor0->signal(SIGTERM);
+    run.actor1->signal(SIGTERM);
+    EXPECT_EQ(run.actor0->wait(30s), 0) << logs(run_id);
+    EXPECT_EQ(run.actor1->wait(30s), 0) << logs(run_id);
+    run.learner->signal(SIGTERM);
+    EXPECT_EQ(run.learner->wait(60s), 0) << logs(run_id);
+    out.wait_share[0] = wait_share(run_id, "actor-0");
+    out.wait_share[1] = wait_share(run_id, "actor-1");
+    return out;
+  };
+  const Measured limited = measure("limited", false);
+  const Measured async = measure("async", true);
+  std::printf(
+      "[figures] slow learner (replay ratio 128): rate-limited %.1f env steps/s (ratio %.1f, "
+      "actors waited %.0f%%/%.0f%%), async %.1f env steps/s (ratio %.2f, actors waited "
+      "%.0f%%/%.0f%%)\n",
+      limited.steps_per_s, limited.ratio, 100 * limited.wait_share[0], 100 * limited.wait_share[1],
+      async.steps_per_s, async.ratio, 100 * async.wait_share[0], 100 * async.wait_share[1]);
+  // Rate-limited actors spend most of their time waiting for the learner; async ones never
+  // wait, so they step clearly faster and the ratio falls below the configured one.
+  for (int id : {0, 1}) {
+    EXPECT_GT(limited.wait_share[id], 0.3) << "actor " << id;
+    EXPECT_GE(async.wait_share[id], 0.0) << "actor " << id << " logged no wait time";
+    EXPECT_LT(async.wait_share[id], 0.05) << "actor " << id;
+  }
+  EXPECT_GT(async.steps_per_s, 2.0 * limited.steps_per_s);
+  EXPECT_LT(async.ratio, 0.5 * 128.0);
+}
+
+}  // namespace
+}  // namespace indrive
