@@ -77,14 +77,23 @@ class FaultTest : public ::testing::Test {
   fs::path profile_ = testing::source_path("deploy/dds/single_host.xml");
 };
 
-// Sum of steps and number of chunks of `chunks`; checks that every chunk is complete.
+// Sum of steps and number of chunks of `chunks` (in arrival order); checks that every chunk is
+// complete: L steps, or fewer when it ends an episode or when the actor switched to a newer
+// snapshot after it (every chunk is made by one policy version).
 std::pair<std::int64_t, std::int64_t> complete_chunks(const std::vector<SeenChunk>& chunks) {
   std::int64_t steps = 0;
-  for (const auto& chunk : chunks) {
-    EXPECT_TRUE(chunk.num_steps == kChunkLength || chunk.ends_episode)
-        << "actor " << chunk.actor_id << " sent chunk " << chunk.chunk_seq << " with "
-        << chunk.num_steps << " steps that does not end an episode";
+  for (std::size_t i = 0; i < chunks.size(); ++i) {
+    const SeenChunk& chunk = chunks[i];
     steps += chunk.num_steps;
+    if (chunk.num_steps == kChunkLength || chunk.ends_episode) continue;
+    const auto next = std::find_if(chunks.begin() + static_cast<std::ptrdiff_t>(i) + 1,
+                                   chunks.end(), [&](const SeenChunk& later) {
+                                     return later.actor_id == chunk.actor_id;
+                                   });
+    EXPECT_TRUE(next != chunks.end() && next->chunk_seq == chunk.chunk_seq + 1 &&
+                next->policy_version > chunk.policy_version)
+        << "actor " << chunk.actor_id << " sent chunk " << chunk.chunk_seq << " with "
+        << chunk.num_steps << " steps that neither ends an episode nor precedes a new snapshot";
   }
   return {steps, static_cast<std::int64_t>(chunks.size())};
 }
@@ -156,7 +165,7 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
   const auto all = watch.chunks();
   EXPECT_TRUE(std::any_of(all.begin(), all.end(), [&](const SeenChunk& chunk) {
     return chunk.actor_id == 1 && chunk.time_s > killed_at &&
-           chunk.time_s < killed_at + respawned_s;
+           chunk.time_s < killed_at + first_chunk_s;
   })) << "actor 1 must keep sending while actor 0 is down";
   std::printf(
       "[figures] actor kill -9 under launch: respawned after %.2f s, first chunk after %.2f s "
@@ -193,7 +202,7 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
 
 TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheckpoint) {
   ProcessWatch watch(domain_, profile_);
-  const std::vector<std::string> learner_overrides = {"learner.checkpoint_minutes=0.05"};
+  const std::vector<std::string> learner_overrides = {"learner.checkpoint_minutes=0.1"};
   auto learner = start_learner(learner_overrides);
   auto actor0 = start_actor(0);
   auto actor1 = start_actor(1);
@@ -267,7 +276,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   ASSERT_TRUE(wait_until(30s, [&] {
     SeenHeartbeat beat;
     return watch.heartbeat(msg::ROLE_LEARNER, 0, beat) &&
-           beat.updates > static_cast<std::uint64_t>(at_checkpoint.updates) + 20;
+           beat.updates > static_cast<std::uint64_t>(at_checkpoint.updates) + 5;
   })) << logs();
   actor0->signal(SIGTERM);
   actor1->signal(SIGTERM);
@@ -294,11 +303,16 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   EXPECT_GE(resumed.front().value("env_steps", 0), checkpoint_steps);
   EXPECT_GE(resumed.front().value("updates", 0), at_checkpoint.updates);
   EXPECT_GT(resumed.back().value("env_steps", 0), checkpoint_steps);
-  EXPECT_GT(resumed.back().value("updates", 0), at_checkpoint.updates + 20);
+  EXPECT_GT(resumed.back().value("updates", 0), at_checkpoint.updates + 5);
   EXPECT_GT(resumed.back().value("policy_version", 0u), published_before);
-  // The ratio holds across the restart because no refill was needed.
+  // Nothing was lost: replay holds every step the learner counts, those from before the kill
+  // (restored) and those after it, and the resumed learner never trained ahead of the ratio.
+  for (const auto& line : resumed) {
+    EXPECT_EQ(line.value("replay_size", -1), line.value("env_steps", -2)) << line.dump();
+    EXPECT_LE(line.value("updates", 0.0) * 128.0, 4.0 * line.value("env_steps", 0.0))
+        << line.dump();
+  }
   const double ratio = resumed.back().value("replay_ratio", 0.0);
-  EXPECT_NEAR(ratio, 32.0, 32.0 * 0.05) << resumed.back().dump();
   std::printf(
       "[figures] learner kill -9: checkpoint at %lld steps / %lld updates / v%llu with %zu "
       "replay bytes, v%llu published before the kill; actors held v%llu and v%llu, used "
@@ -378,8 +392,22 @@ TEST_F(FaultTest, LateJoiningEvaluatorGetsTheNewestSnapshotAlsoThroughTheReReque
   actor1->signal(SIGTERM);
   ASSERT_EQ(actor0->wait(30s), 0) << logs();
   ASSERT_EQ(actor1->wait(30s), 0) << logs();
-  std::this_thread::sleep_for(1s);
-  const std::uint64_t final_version = watch.newest_snapshot();
+  // The learner still does the updates it owes for the steps it got; after them it publishes
+  // nothing new.
+  std::uint64_t final_version = watch.newest_snapshot();
+  std::uint64_t updates = 0;
+  auto unchanged_since = std::chrono::steady_clock::now();
+  ASSERT_TRUE(wait_until(90s, [&] {
+    SeenHeartbeat beat;
+    watch.heartbeat(msg::ROLE_LEARNER, 0, beat);
+    if (watch.newest_snapshot() != final_version || beat.updates != updates) {
+      final_version = watch.newest_snapshot();
+      updates = beat.updates;
+      unchanged_since = std::chrono::steady_clock::now();
+    }
+    // Replay ratio 4 with 8 x 16 steps per update: all updates due are done.
+    return testing::seconds_since(unchanged_since) > 3.0 && beat.updates >= beat.env_steps / 32;
+  })) << logs();
   const fs::path volatile_profile = volatile_policy_profile(dir_.path());
   ASSERT_FALSE(volatile_profile.empty()) << "single_host.xml has no policy_reader profile";
   const double requested_from = watch.now_s();
@@ -421,26 +449,28 @@ TEST_F(FaultTest, ActorsRejectForeignAndCorruptSnapshotsAndKeepRunning) {
 
   // A snapshot for another architecture and one with a bad checksum, both of this run and with
   // a version far above the learner's, so only the checks can keep the actors from taking it.
+  const std::uint64_t newest = watch.newest_snapshot();  // the watch sees its own writes too
   auto writer = watch.participant().make_writer<msg::PolicySnapshot>();
   msg::PolicySnapshot foreign;
   foreign.run_id("ftest");
   foreign.version(1000000);
   foreign.preset("cpu");
   foreign.architecture("image=64 channels=3 cnn_depth=16 deter=256 units=256 stoch=32x32");
+  foreign.heads(msg::HEAD_ENCODER | msg::HEAD_RSSM | msg::HEAD_EXPLORATION_ACTOR);
   foreign.params(std::vector<std::uint8_t>(4096, 7));
   dds::seal(foreign);
+  // One at a time: the topic keeps only the newest sample (KEEP_LAST 1).
   ASSERT_TRUE(writer->write(foreign));
+  ASSERT_TRUE(writer->wait_for_acknowledgments(10000ms));
   msg::PolicySnapshot corrupt = foreign;
   corrupt.version(2000000);
-  corrupt.architecture("");
   dds::seal(corrupt);
   corrupt.checksum(corrupt.checksum() ^ 1u);
   ASSERT_TRUE(writer->write(corrupt));
-  writer->wait_for_acknowledgments(5000ms);
+  ASSERT_TRUE(writer->wait_for_acknowledgments(10000ms));
 
   // Each actor counts both (its heartbeat's dropped_messages) and goes on with the learner's
   // snapshots.
-  const std::uint64_t newest = watch.newest_snapshot();
   ASSERT_TRUE(wait_until(30s, [&] {
     for (std::uint32_t id : {0u, 1u}) {
       SeenHeartbeat beat;
@@ -450,7 +480,7 @@ TEST_F(FaultTest, ActorsRejectForeignAndCorruptSnapshotsAndKeepRunning) {
   })) << logs();
   ASSERT_TRUE(wait_until(60s, [&] {
     const auto version = watch.min_newest_chunk_version({0, 1});
-    return version > 2 && version < 1000000 && version >= newest;
+    return version > newest && version < 1000000;
   })) << logs();
   EXPECT_TRUE(actor0->running() && actor1->running() && learner->running()) << logs();
   for (const char* name : {"actor-0.log", "actor-1.log"}) {

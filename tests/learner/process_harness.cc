@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -88,6 +89,15 @@ std::vector<nlohmann::json> read_metrics(const fs::path& path) {
     if (!record.is_discarded()) records.push_back(std::move(record));
   }
   return records;
+}
+
+bool keeps_ratio(const nlohmann::json& line, double ratio, double steps_per_update,
+                 double lead_steps) {
+  const double env_steps = line.value("env_steps", 0.0);
+  const double updates = line.value("updates", 0.0);
+  const double due = std::floor(ratio * env_steps / steps_per_update);
+  const double due_behind = std::floor(ratio * (env_steps - lead_steps) / steps_per_update);
+  return updates <= due && updates >= due_behind;
 }
 
 double cpu_seconds(pid_t pid) {
@@ -248,7 +258,7 @@ agent:
     prefill: 128
     capacity: 20000
 learner:
-  replay_ratio: 32
+  replay_ratio: 4
   snapshot_every: 2
   log_interval_s: 1
   announce_s: 0.5

@@ -62,6 +62,12 @@ std::string slurp(const std::filesystem::path& path);
 // a killed learner may leave a partial last line).
 std::vector<nlohmann::json> read_metrics(const std::filesystem::path& path);
 
+// Whether a metrics line keeps the replay ratio: no more updates than are due for its env
+// steps (the learner never trains ahead), and env steps at most `lead_steps` ahead of what its
+// updates cover (the actors' slack and the steps in flight).
+bool keeps_ratio(const nlohmann::json& line, double ratio, double steps_per_update,
+                 double lead_steps);
+
 // User plus system CPU time of a process so far, in seconds (-1 when it is gone).
 double cpu_seconds(pid_t pid);
 
@@ -128,7 +134,8 @@ class ProcessWatch {
 };
 
 // The YAML of the tiny-preset service runs of these tests: 16-step chunks, a 128-step prefill,
-// a snapshot every 2 updates, metrics every second, fast announces and re-requests. Tests
+// replay ratio 4 (one update per 32 env steps, so that a loaded machine still trains often
+// enough), a snapshot every 2 updates, metrics every second, fast announces and re-requests. Tests
 // change single keys with --set.
 std::string tiny_service_config();
 
