@@ -86,10 +86,9 @@ std::pair<std::int64_t, std::int64_t> complete_chunks(const std::vector<SeenChun
     const SeenChunk& chunk = chunks[i];
     steps += chunk.num_steps;
     if (chunk.num_steps == kChunkLength || chunk.ends_episode) continue;
-    const auto next = std::find_if(chunks.begin() + static_cast<std::ptrdiff_t>(i) + 1,
-                                   chunks.end(), [&](const SeenChunk& later) {
-                                     return later.actor_id == chunk.actor_id;
-                                   });
+    const auto next =
+        std::find_if(chunks.begin() + static_cast<std::ptrdiff_t>(i) + 1, chunks.end(),
+                     [&](const SeenChunk& later) { return later.actor_id == chunk.actor_id; });
     EXPECT_TRUE(next != chunks.end() && next->chunk_seq == chunk.chunk_seq + 1 &&
                 next->policy_version > chunk.policy_version)
         << "actor " << chunk.actor_id << " sent chunk " << chunk.chunk_seq << " with "

@@ -84,8 +84,8 @@ TEST_F(ReplayRatioTest, HoldsWithinFivePercentOverARunWithTwoActors) {
   // Two actors may each run ahead of training by one update's steps, the slack and an open
   // chunk (see keeps_ratio).
   constexpr double kLead = 2 * (32 + 16 + 16);
-  Run run = start("limited", {"run.budget_env_steps=" + std::to_string(kBudget),
-                              "learner.replay_ratio=4"});
+  Run run = start("limited",
+                  {"run.budget_env_steps=" + std::to_string(kBudget), "learner.replay_ratio=4"});
   // The learner ends the run by itself once the budget's updates are done.
   ASSERT_EQ(run.learner->wait(150s), 0) << logs("limited");
   run.actor0->signal(SIGTERM);
@@ -143,12 +143,13 @@ TEST_F(ReplayRatioTest, AsyncModeIsNotLimitedByASlowLearner) {
     EXPECT_TRUE(wait_until(90s, [&] {
       return watch.heartbeat(msg::ROLE_LEARNER, 0, first) && first.updates > 0;
     })) << logs(run_id);
-    std::this_thread::sleep_for(8s);
+    std::this_thread::sleep_for(5s);
     EXPECT_TRUE(watch.heartbeat(msg::ROLE_LEARNER, 0, second));
     out.steps_per_s = static_cast<double>(second.env_steps - first.env_steps) /
                       std::max(1e-9, second.time_s - first.time_s);
     out.ratio = static_cast<double>(second.updates) * kStepsPerUpdate /
                 std::max<double>(1.0, static_cast<double>(second.env_steps));
+    EXPECT_GT(second.env_steps, first.env_steps) << logs(run_id);
     run.actor0->signal(SIGTERM);
     run.actor1->signal(SIGTERM);
     EXPECT_EQ(run.actor0->wait(30s), 0) << logs(run_id);
@@ -159,12 +160,14 @@ TEST_F(ReplayRatioTest, AsyncModeIsNotLimitedByASlowLearner) {
     out.wait_share[1] = wait_share(run_id, "actor-1");
     return out;
   };
-  const Measured limited = measure("limited", false);
   const Measured async = measure("async", true);
+  const Measured limited = measure("limited", false);
+  // (The rate-limited learner is still catching up with the prefill both actors overshot, so
+  // its ratio is below 128 over this short window; the run's ratio is tested above.)
   std::printf(
-      "[figures] slow learner (replay ratio 128): rate-limited %.1f env steps/s (ratio %.1f, "
-      "actors waited %.0f%%/%.0f%%), async %.1f env steps/s (ratio %.2f, actors waited "
-      "%.0f%%/%.0f%%)\n",
+      "[figures] slow learner (replay ratio 128), 5 s after the first update: rate-limited "
+      "%.1f env steps/s (ratio so far %.1f, actors waited %.0f%%/%.0f%%), async %.1f env "
+      "steps/s (ratio %.2f, actors waited %.0f%%/%.0f%%)\n",
       limited.steps_per_s, limited.ratio, 100 * limited.wait_share[0], 100 * limited.wait_share[1],
       async.steps_per_s, async.ratio, 100 * async.wait_share[0], 100 * async.wait_share[1]);
   // Rate-limited actors spend most of their time waiting for the learner; async ones never
