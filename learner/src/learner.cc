@@ -548,6 +548,8 @@ struct Learner::Impl {
       }
       if (!worked) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
+    // Chunks already received are stored, so the final checkpoint keeps them.
+    drain();
     if (stats.counters.env_steps > 0 || stats.counters.updates > 0) save_checkpoint();
     release_reserved_versions();
     last_log = Clock::now() - std::chrono::hours(1);
