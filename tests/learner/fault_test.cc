@@ -7,6 +7,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <thread>
 
@@ -95,6 +96,25 @@ std::pair<std::int64_t, std::int64_t> complete_chunks(const std::vector<SeenChun
         << chunk.num_steps << " steps that neither ends an episode nor precedes a new snapshot";
   }
   return {steps, static_cast<std::int64_t>(chunks.size())};
+}
+
+// Chunks the test never saw, from the sequence numbers: each actor process numbers its chunks
+// from 0 (a restarted actor starts again at 0), so the numbers below the first one seen of a
+// process and the holes between seen ones were sent but not observed.
+std::int64_t missed_chunks(const std::vector<SeenChunk>& chunks) {
+  std::map<std::uint32_t, std::int64_t> next;  // per actor: the next sequence number expected
+  std::int64_t missed = 0;
+  for (const auto& chunk : chunks) {
+    const auto seq = static_cast<std::int64_t>(chunk.chunk_seq);
+    auto it = next.find(chunk.actor_id);
+    if (it == next.end() || seq < it->second) {
+      missed += seq;  // a new process: its chunks 0 .. seq - 1
+    } else {
+      missed += seq - it->second;
+    }
+    next[chunk.actor_id] = seq + 1;
+  }
+  return missed;
 }
 
 TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapshot) {
@@ -190,10 +210,26 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
   const auto lines = metrics();
   ASSERT_FALSE(lines.empty());
   const auto& last = lines.back();
-  const auto [steps, chunks] = complete_chunks(watch.chunks());
-  EXPECT_EQ(last.value("env_steps", -1), steps) << last.dump();
-  EXPECT_EQ(last.value("chunks", -1), chunks) << last.dump();
-  EXPECT_EQ(last.value("replay_size", -1), steps) << "capacity exceeds the run's steps";
+  const auto seen = watch.chunks();
+  const auto [steps, chunks] = complete_chunks(seen);
+  // On a loaded host the test's reader can match an actor's writer after its first chunks went
+  // out (a volatile topic does not replay them); those are counted from the sequence numbers,
+  // at most L steps each. With none missed the comparison is exact.
+  const std::int64_t missed = missed_chunks(seen);
+  EXPECT_EQ(last.value("chunks", -1), chunks + missed) << last.dump();
+  EXPECT_GE(last.value("env_steps", -1), steps) << last.dump();
+  EXPECT_LE(last.value("env_steps", -1), steps + missed * kChunkLength) << last.dump();
+  if (missed == 0) {
+    EXPECT_EQ(last.value("env_steps", -1), steps) << last.dump();
+  }
+  EXPECT_EQ(last.value("replay_size", -1), last.value("env_steps", -2))
+      << "capacity exceeds the run's steps";
+  std::printf(
+      "[figures] learner stored %lld steps in %lld chunks; the test saw %lld chunks "
+      "(%lld missed before its reader matched)\n",
+      static_cast<long long>(last.value("env_steps", 0)),
+      static_cast<long long>(last.value("chunks", 0)), static_cast<long long>(chunks),
+      static_cast<long long>(missed));
   EXPECT_EQ(last.value("dropped_chunks", -1), 0);
   EXPECT_NE(testing::slurp(run_dir_ / "logs" / "actor-0.log").find("acting with snapshot v"),
             std::string::npos);
