@@ -310,7 +310,8 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   const std::int64_t checkpoint_steps = at_checkpoint.env_steps;
   ASSERT_TRUE(wait_until(30s, [&] {
     SeenHeartbeat beat;
-    return watch.heartbeat(msg::ROLE_LEARNER, 0, beat) &&
+    // Only the restarted learner's heartbeats: the killed one's last may still be the newest.
+    return watch.heartbeat(msg::ROLE_LEARNER, 0, beat) && beat.time_s > restarted_at + 0.5 &&
            beat.updates > static_cast<std::uint64_t>(at_checkpoint.updates) + 5;
   })) << logs();
   actor0->signal(SIGTERM);

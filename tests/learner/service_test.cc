@@ -113,7 +113,7 @@ agent:
     prefill: 128
     capacity: 20000
 learner:
-  replay_ratio: 32
+  replay_ratio: 4
   snapshot_every: 2
   log_interval_s: 1
   announce_s: 0.5
