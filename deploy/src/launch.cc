@@ -41,7 +41,14 @@ std::vector<ProcessSpec> launch_plan(const LaunchOptions& options) {
   const auto args = common_args(options, run_dir);
   std::vector<ProcessSpec> plan;
 
-  ProcessSpec learner{.name = "learner", .essential = true, .log_file = logs / "learner.log"};
+  // A crashed learner is restarted too: it resumes from its newest checkpoint while the actors
+  // wait at their allowance. A clean exit (budget reached, stopped) ends the run.
+  ProcessSpec learner{
+      .name = "learner",
+      .restart = RestartPolicy::kOnFailure,
+      .backoff = {.initial_s = 1.0, .factor = 2.0, .max_s = 30.0, .max_restarts = 10},
+      .essential = true,
+      .log_file = logs / "learner.log"};
   learner.argv = {(options.bin_dir / "indrive-learner").string()};
   learner.argv.insert(learner.argv.end(), args.begin(), args.end());
   plan.push_back(std::move(learner));

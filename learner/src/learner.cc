@@ -1,5 +1,7 @@
 #include "indrive/learner/learner.h"
 
+#include <zstd.h>
+
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -24,7 +26,16 @@ namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr std::string_view kCheckpointMagic = "INDRIVE-LEARNER-CHECKPOINT 1\n";
+// Version 1 holds counters and agent bytes; version 2 adds the sizes of its sections and the
+// zstd-compressed replay file.
+constexpr std::string_view kCheckpointMagicV1 = "INDRIVE-LEARNER-CHECKPOINT 1\n";
+constexpr std::string_view kCheckpointMagic = "INDRIVE-LEARNER-CHECKPOINT 2\n";
+// Replay holds class-id frames: a fast level already shrinks them many times over.
+constexpr int kReplayZstdLevel = 1;
+// Versions are reserved in blocks written to this file before any of them is published, so a
+// learner killed between checkpoints never hands out a version twice after its restart.
+constexpr std::string_view kVersionReserveFile = "policy_versions_reserved";
+constexpr std::uint64_t kVersionReserveBlock = 100;
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
@@ -37,42 +48,89 @@ double unix_time_s() {
 }  // namespace
 
 std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
-                                          std::span<const std::uint8_t> agent_bytes) {
-  const nlohmann::json meta = {{"env_steps", counters.env_steps},
-                               {"updates", counters.updates},
-                               {"policy_version", counters.policy_version},
-                               {"learner_epoch", counters.learner_epoch}};
+                                          std::span<const std::uint8_t> agent_bytes,
+                                          std::span<const std::uint8_t> replay_bytes) {
+  std::vector<std::uint8_t> replay_zstd;
+  if (!replay_bytes.empty()) {
+    // The frame carries a checksum of its content, so a damaged section is noticed.
+    std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
+    ZSTD_CCtx_setParameter(context.get(), ZSTD_c_compressionLevel, kReplayZstdLevel);
+    ZSTD_CCtx_setParameter(context.get(), ZSTD_c_checksumFlag, 1);
+    replay_zstd.resize(ZSTD_compressBound(replay_bytes.size()));
+    const std::size_t size = ZSTD_compress2(context.get(), replay_zstd.data(), replay_zstd.size(),
+                                            replay_bytes.data(), replay_bytes.size());
+    INDRIVE_CHECK(!ZSTD_isError(size)) << "zstd failed on the replay: " << ZSTD_getErrorName(size);
+    replay_zstd.resize(size);
+  }
+  const nlohmann::json meta = {
+      {"env_steps", counters.env_steps},           {"updates", counters.updates},
+      {"policy_version", counters.policy_version}, {"learner_epoch", counters.learner_epoch},
+      {"agent_bytes", agent_bytes.size()},         {"replay_bytes", replay_bytes.size()},
+      {"replay_zstd_bytes", replay_zstd.size()}};
   const std::string head = std::string(kCheckpointMagic) + meta.dump() + "\n";
   std::vector<std::uint8_t> bytes(head.begin(), head.end());
   bytes.insert(bytes.end(), agent_bytes.begin(), agent_bytes.end());
+  bytes.insert(bytes.end(), replay_zstd.begin(), replay_zstd.end());
   return bytes;
 }
 
 LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
-                                  std::vector<std::uint8_t>& agent_bytes) {
+                                  std::vector<std::uint8_t>& agent_bytes,
+                                  std::vector<std::uint8_t>* replay_bytes) {
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
-  if (!text.starts_with(kCheckpointMagic)) {
+  const bool v1 = text.starts_with(kCheckpointMagicV1);
+  if (!v1 && !text.starts_with(kCheckpointMagic)) {
     throw CheckpointError("not a learner checkpoint (its first line is not '" +
                           std::string(kCheckpointMagic.substr(0, kCheckpointMagic.size() - 1)) +
                           "')");
   }
-  const std::size_t meta_end = text.find('\n', kCheckpointMagic.size());
+  const std::size_t magic_size = kCheckpointMagic.size();
+  const std::size_t meta_end = text.find('\n', magic_size);
   if (meta_end == std::string_view::npos) {
     throw CheckpointError("learner checkpoint is truncated inside its counters line");
   }
   LearnerCounters counters;
+  std::uint64_t agent_size = bytes.size() - (meta_end + 1);
+  std::uint64_t replay_size = 0, replay_zstd_size = 0;
   try {
-    const auto meta = nlohmann::json::parse(
-        text.substr(kCheckpointMagic.size(), meta_end - kCheckpointMagic.size()));
+    const auto meta = nlohmann::json::parse(text.substr(magic_size, meta_end - magic_size));
     counters.env_steps = meta.at("env_steps").get<std::int64_t>();
     counters.updates = meta.at("updates").get<std::int64_t>();
     counters.policy_version = meta.at("policy_version").get<std::uint64_t>();
     counters.learner_epoch = meta.at("learner_epoch").get<std::uint64_t>();
+    if (!v1) {
+      agent_size = meta.at("agent_bytes").get<std::uint64_t>();
+      replay_size = meta.at("replay_bytes").get<std::uint64_t>();
+      replay_zstd_size = meta.at("replay_zstd_bytes").get<std::uint64_t>();
+    }
   } catch (const nlohmann::json::exception& error) {
     throw CheckpointError(std::string("learner checkpoint counters are unreadable: ") +
                           error.what());
   }
-  agent_bytes.assign(bytes.begin() + static_cast<std::ptrdiff_t>(meta_end + 1), bytes.end());
+  const std::size_t agent_begin = meta_end + 1;
+  if (bytes.size() - agent_begin != agent_size + replay_zstd_size) {
+    throw CheckpointError("learner checkpoint has " + std::to_string(bytes.size() - agent_begin) +
+                          " bytes after its counters, its header says " +
+                          std::to_string(agent_size + replay_zstd_size) +
+                          " (truncated or damaged file); delete it to resume from an older one");
+  }
+  agent_bytes.assign(bytes.begin() + static_cast<std::ptrdiff_t>(agent_begin),
+                     bytes.begin() + static_cast<std::ptrdiff_t>(agent_begin + agent_size));
+  if (replay_bytes != nullptr) {
+    replay_bytes->clear();
+    if (replay_zstd_size > 0) {
+      replay_bytes->resize(replay_size);
+      const std::size_t got =
+          ZSTD_decompress(replay_bytes->data(), replay_bytes->size(),
+                          bytes.data() + agent_begin + agent_size, replay_zstd_size);
+      if (ZSTD_isError(got) || got != replay_size) {
+        throw CheckpointError(
+            std::string("the replay section of the learner checkpoint does not decompress (") +
+            (ZSTD_isError(got) ? ZSTD_getErrorName(got) : "wrong size") +
+            "); delete the file to resume from an older checkpoint");
+      }
+    }
+  }
   return counters;
 }
 
@@ -115,7 +173,8 @@ struct Learner::Impl {
 
     resume();
     fill_target = std::min<std::int64_t>(agent_config.replay.prefill, agent_config.replay.capacity);
-    fill_floor = stats.counters.env_steps + agent_config.replay.prefill;
+    // Actors may always run until replay holds the prefill again; a restored replay needs none.
+    fill_floor = stats.counters.env_steps + std::max<std::int64_t>(0, fill_target - replay.size());
 
     participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
         .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
@@ -156,11 +215,14 @@ struct Learner::Impl {
 
   // Restores the newest checkpoint of this run, or a finetune's initial checkpoint.
   void resume() {
-    std::vector<std::uint8_t> agent_bytes;
+    std::vector<std::uint8_t> agent_bytes, replay_bytes;
     if (auto newest = checkpoints.newest()) {
-      stats.counters = unpack_checkpoint(read_file(*newest), agent_bytes);
+      stats.counters = unpack_checkpoint(read_file(*newest), agent_bytes, &replay_bytes);
       load_agent(agent_bytes);
-      INDRIVE_LOG(kInfo, "learner") << "resumed from " << newest->string();
+      if (!replay_bytes.empty()) load_replay(replay_bytes);
+      stats.restored_replay_steps = replay.size();
+      INDRIVE_LOG(kInfo, "learner")
+          << "resumed from " << newest->string() << " with " << replay.size() << " replay steps";
     } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
                !init.empty()) {
       const auto bytes = read_file(init);
@@ -173,6 +235,44 @@ struct Learner::Impl {
       INDRIVE_LOG(kInfo, "learner") << "initialised from " << init;
     }
     ++stats.counters.learner_epoch;
+    // Snapshots published after the newest checkpoint used versions up to the reserved mark.
+    reserved_version = read_reserved_version();
+    stats.counters.policy_version = std::max(stats.counters.policy_version, reserved_version);
+  }
+
+  std::uint64_t read_reserved_version() const {
+    const fs::path path = run.checkpoints() / kVersionReserveFile;
+    if (!fs::exists(path)) return 0;
+    const auto bytes = read_file(path);
+    try {
+      return std::stoull(std::string(bytes.begin(), bytes.end()));
+    } catch (const std::exception&) {
+      throw CheckpointError("file " + path.string() +
+                            " does not hold a policy version; delete it only if no actor of this "
+                            "run still holds a snapshot");
+    }
+  }
+
+  // Makes sure `version` is reserved on disk before it is published.
+  void reserve_version(std::uint64_t version) {
+    if (version <= reserved_version) return;
+    reserved_version = version + kVersionReserveBlock - 1;
+    atomic_write(run.checkpoints() / kVersionReserveFile, std::to_string(reserved_version));
+  }
+
+  // After the final checkpoint no version above the current one was published: a clean
+  // restart continues right after it instead of after the reserved block.
+  void release_reserved_versions() {
+    if (reserved_version <= stats.counters.policy_version) return;
+    reserved_version = stats.counters.policy_version;
+    atomic_write(run.checkpoints() / kVersionReserveFile, std::to_string(reserved_version));
+  }
+
+  void load_replay(const std::vector<std::uint8_t>& bytes) {
+    const fs::path staging = run.checkpoints() / "replay-staging.bin";
+    atomic_write(staging, bytes);
+    replay.load(staging);
+    fs::remove(staging);
   }
 
   void load_agent(const std::vector<std::uint8_t>& bytes) {
@@ -188,13 +288,22 @@ struct Learner::Impl {
     agent.save_checkpoint(staging);
     const auto agent_bytes = read_file(staging);
     fs::remove(staging);
-    const fs::path path = checkpoints.save(static_cast<std::uint64_t>(stats.counters.updates),
-                                           pack_checkpoint(stats.counters, agent_bytes));
+    // Replay goes into the same file, so counters, model and data always match.
+    const fs::path replay_staging = run.checkpoints() / "replay-staging.bin";
+    replay.save(replay_staging);
+    const auto replay_bytes = read_file(replay_staging);
+    fs::remove(replay_staging);
+    const auto packed = pack_checkpoint(stats.counters, agent_bytes, replay_bytes);
+    const fs::path path =
+        checkpoints.save(static_cast<std::uint64_t>(stats.counters.updates), packed);
     ++stats.checkpoints;
     last_checkpoint = Clock::now();
     INDRIVE_LOG(kInfo, "learner") << "checkpoint " << path.filename().string() << " ("
-                                  << agent_bytes.size() << " bytes, " << seconds_since(start)
-                                  << " s)";
+                                  << packed.size() << " bytes: agent " << agent_bytes.size()
+                                  << ", replay of " << replay.size() << " steps "
+                                  << replay_bytes.size() << " -> "
+                                  << packed.size() - agent_bytes.size() << " compressed; "
+                                  << seconds_since(start) << " s)";
   }
 
   // DDS thread: decode and queue; the acting thread owns the replay buffer.
@@ -230,9 +339,11 @@ struct Learner::Impl {
     }
     for (DecodedChunk& chunk : taken) {
       // A missing predecessor (lost chunk) must not glue two pieces of trajectory together.
+      // After a learner restart the first chunk of an actor follows steps that were never
+      // stored (they arrived after the checkpoint), so it starts a new piece as well.
       auto expected = next_seq.find(chunk.actor_id);
-      if (chunk.chunk_seq != 0 && expected != next_seq.end() &&
-          expected->second != chunk.chunk_seq) {
+      if (chunk.chunk_seq != 0 &&
+          (expected == next_seq.end() || expected->second != chunk.chunk_seq)) {
         ++stats.sequence_gaps;
         chunk.steps.front().is_first = true;
       }
@@ -271,6 +382,7 @@ struct Learner::Impl {
   void publish_snapshot() {
     msg::PolicySnapshot snapshot;
     snapshot.run_id(config.run_id());
+    reserve_version(stats.counters.policy_version + 1);
     snapshot.version(++stats.counters.policy_version);
     snapshot.preset(agent_config.preset);
     snapshot.architecture(actor::architecture_descriptor(agent_config));
@@ -369,6 +481,9 @@ struct Learner::Impl {
                              {"policy_version", stats.counters.policy_version},
                              {"policy_lag", lag},
                              {"replay_size", replay.size()},
+                             {"replay_added", replay.total_added()},
+                             {"snapshots_published", stats.snapshots_published},
+                             {"snapshot_requests", stats.snapshot_requests},
                              {"chunks", stats.chunks},
                              {"dropped_chunks", drops.dropped()},
                              {"dropped_wrong_run", drops.count(dds::DropReason::kWrongRun)},
@@ -433,7 +548,10 @@ struct Learner::Impl {
       }
       if (!worked) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
+    // Chunks already received are stored, so the final checkpoint keeps them.
+    drain();
     if (stats.counters.env_steps > 0 || stats.counters.updates > 0) save_checkpoint();
+    release_reserved_versions();
     last_log = Clock::now() - std::chrono::hours(1);
     log_metrics();
     publish_pacing(true);
@@ -461,6 +579,7 @@ struct Learner::Impl {
   double checkpoint_s = 300.0;
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;
+  std::uint64_t reserved_version = 0;
   bool done = false;
 
   std::unique_ptr<dds::Participant> participant;

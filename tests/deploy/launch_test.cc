@@ -23,7 +23,8 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
   ASSERT_EQ(plan.size(), 4u);
   EXPECT_EQ(plan[0].name, "learner");
   EXPECT_TRUE(plan[0].essential);
-  EXPECT_EQ(plan[0].restart, RestartPolicy::kNever);
+  EXPECT_EQ(plan[0].restart, RestartPolicy::kOnFailure);  // resumes from its checkpoint
+  EXPECT_GT(plan[0].backoff.max_restarts, 0);
   EXPECT_EQ(plan[0].argv[0], "/opt/indrive/bin/indrive-learner");
   EXPECT_EQ(plan[1].name, "actor-0");
   EXPECT_EQ(plan[2].name, "actor-1");

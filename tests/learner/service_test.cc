@@ -81,6 +81,7 @@ struct Observed {
   std::mutex mutex;
   std::map<std::uint32_t, std::vector<std::uint64_t>> chunk_versions;  // per actor, in order
   std::uint64_t newest_snapshot = 0;
+  std::uint64_t learner_env_steps = 0;  // from the learner's newest heartbeat
   std::uint64_t snapshot_bytes = 0;
 
   std::uint64_t min_newest_chunk_version() {
@@ -112,7 +113,7 @@ agent:
     prefill: 128
     capacity: 20000
 learner:
-  replay_ratio: 32
+  replay_ratio: 4
   snapshot_every: 2
   log_interval_s: 1
   announce_s: 0.5
@@ -180,6 +181,11 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
         seen.newest_snapshot = std::max(seen.newest_snapshot, snapshot.version());
         seen.snapshot_bytes = snapshot.params().size();
       });
+  auto heartbeat_reader = participant.make_reader<msg::Heartbeat>([&](const msg::Heartbeat& beat) {
+    if (beat.role() != msg::ROLE_LEARNER) return;
+    std::lock_guard<std::mutex> lock(seen.mutex);
+    seen.learner_env_steps = beat.env_steps();
+  });
   auto chunk_writer = participant.make_writer<msg::TrajectoryChunk>();
 
   auto learner = start_learner();
@@ -256,6 +262,15 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
     std::this_thread::sleep_for(200ms);
   }
   EXPECT_GT(seen.min_newest_chunk_version(), version_before) << logs();
+  // The resumed learner stored new steps (not only the chunks the test saw in flight).
+  const auto stored_deadline = std::chrono::steady_clock::now() + 30s;
+  while (std::chrono::steady_clock::now() < stored_deadline) {
+    {
+      std::lock_guard<std::mutex> lock(seen.mutex);
+      if (seen.learner_env_steps > static_cast<std::uint64_t>(steps_before)) break;
+    }
+    std::this_thread::sleep_for(100ms);
+  }
   learner->signal(SIGTERM);
   ASSERT_EQ(learner->wait(60s), 0) << logs();
   const auto resumed = last_metrics();

@@ -25,8 +25,9 @@ struct LaunchOptions {
   double status_interval_s = 10.0;     // how often the combined status line is printed
 };
 
-// The process specs for `options`: the learner (essential), actors restarted on failure with
-// back-off, evaluators that run once. Output of each goes to <run>/logs/<name>.log too.
+// The process specs for `options`: the learner (essential: its clean exit ends the run; a crash
+// is restarted with back-off, at most 10 times), actors restarted on failure with back-off,
+// evaluators restarted at most 5 times. Output of each goes to <run>/logs/<name>.log too.
 std::vector<ProcessSpec> launch_plan(const LaunchOptions& options);
 
 // Runs the plan until the learner ends or SIGINT/SIGTERM arrives, then stops everything.

@@ -35,13 +35,20 @@ struct LearnerCounters {
   std::uint64_t learner_epoch = 0;  // starts of the learner in this run
 };
 
-// A learner checkpoint: a header line, the counters as one JSON line, then the agent's own
-// checkpoint bytes.
+// A learner checkpoint: a header line, the counters and section sizes as one JSON line, the
+// agent's own checkpoint bytes, then the replay buffer's file (ReplayBuffer::save) compressed
+// with zstd, so that a resumed learner trains on the data it had instead of refilling.
+// `replay_bytes` may be empty (no replay section).
 std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
-                                          std::span<const std::uint8_t> agent_bytes);
-// Splits a packed checkpoint; throws CheckpointError when it is not one.
+                                          std::span<const std::uint8_t> agent_bytes,
+                                          std::span<const std::uint8_t> replay_bytes = {});
+// Splits a packed checkpoint into counters, agent bytes and (when `replay_bytes` is given) the
+// decompressed replay file, empty when the checkpoint has none. Reads the older format without
+// a replay section too. Throws CheckpointError when the bytes are not a learner checkpoint or
+// a section is truncated or corrupt.
 LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
-                                  std::vector<std::uint8_t>& agent_bytes);
+                                  std::vector<std::uint8_t>& agent_bytes,
+                                  std::vector<std::uint8_t>* replay_bytes = nullptr);
 
 // What the learner has done, readable after run().
 struct LearnerStats {
@@ -50,10 +57,11 @@ struct LearnerStats {
   std::uint64_t dropped_chunks = 0;
   std::uint64_t sequence_gaps = 0;  // chunks whose predecessor of the same actor never came
   std::uint64_t snapshots_published = 0;
-  std::uint64_t snapshot_requests = 0;
+  std::uint64_t snapshot_requests = 0;  // republished on a late joiner's SnapshotRequest
   std::uint64_t episodes = 0;
   std::uint64_t failed_updates = 0;
   std::uint64_t checkpoints = 0;
+  std::int64_t restored_replay_steps = 0;  // replay steps restored from the checkpoint
 };
 
 class Learner {

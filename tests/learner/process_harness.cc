@@ -1,0 +1,286 @@
+#include "process_harness.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+extern char** environ;
+
+namespace indrive::testing {
+namespace fs = std::filesystem;
+
+Child::Child(std::vector<std::string> argv, const fs::path& log) {
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_adddup2(&actions, 1, 2);
+  std::vector<char*> args;
+  for (auto& arg : argv) args.push_back(arg.data());
+  args.push_back(nullptr);
+  const int error = posix_spawn(&pid_, args[0], &actions, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (error != 0) throw std::runtime_error("cannot start " + argv[0]);
+}
+
+Child::~Child() {
+  if (pid_ > 0) {
+    ::kill(pid_, SIGKILL);
+    ::waitpid(pid_, nullptr, 0);
+  }
+}
+
+void Child::signal(int number) {
+  if (pid_ > 0) ::kill(pid_, number);
+}
+
+int Child::wait(std::chrono::milliseconds timeout) {
+  const auto end = SteadyClock::now() + timeout;
+  while (pid_ > 0) {
+    int status = 0;
+    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+      pid_ = -1;
+      return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    }
+    if (SteadyClock::now() >= end) return -1;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return -1;
+}
+
+bool Child::running() {
+  int status = 0;
+  return pid_ > 0 && ::waitpid(pid_, &status, WNOHANG) == 0;
+}
+
+bool wait_until(std::chrono::milliseconds timeout, const std::function<bool()>& condition) {
+  const auto end = SteadyClock::now() + timeout;
+  while (!condition()) {
+    if (SteadyClock::now() >= end) return condition();
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return true;
+}
+
+double seconds_since(SteadyClock::time_point start) {
+  return std::chrono::duration<double>(SteadyClock::now() - start).count();
+}
+
+std::string slurp(const fs::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+std::vector<nlohmann::json> read_metrics(const fs::path& path) {
+  std::vector<nlohmann::json> records;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    auto record = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (!record.is_discarded()) records.push_back(std::move(record));
+  }
+  return records;
+}
+
+bool keeps_ratio(const nlohmann::json& line, double ratio, double steps_per_update,
+                 double lead_steps) {
+  const double env_steps = line.value("env_steps", 0.0);
+  const double updates = line.value("updates", 0.0);
+  const double due = std::floor(ratio * env_steps / steps_per_update);
+  const double due_behind = std::floor(ratio * (env_steps - lead_steps) / steps_per_update);
+  return updates <= due && updates >= due_behind;
+}
+
+double cpu_seconds(pid_t pid) {
+  // /proc/<pid>/stat: the command is in parentheses and may hold spaces; fields 14 and 15
+  // (utime, stime) follow, in clock ticks.
+  const std::string stat = slurp("/proc/" + std::to_string(pid) + "/stat");
+  const auto close = stat.rfind(')');
+  if (close == std::string::npos) return -1.0;
+  std::istringstream fields(stat.substr(close + 2));
+  std::string field;
+  long long utime = 0, stime = 0;
+  for (int index = 3; fields >> field; ++index) {
+    if (index == 14) utime = std::stoll(field);
+    if (index == 15) {
+      stime = std::stoll(field);
+      break;
+    }
+  }
+  return static_cast<double>(utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
+}
+
+std::vector<pid_t> child_pids(pid_t parent, const std::vector<std::string>& words) {
+  std::vector<pid_t> found;
+  for (const auto& entry : fs::directory_iterator("/proc")) {
+    const std::string name = entry.path().filename().string();
+    if (name.empty() || !std::all_of(name.begin(), name.end(), ::isdigit)) continue;
+    const std::string stat = slurp(entry.path() / "stat");
+    const auto close = stat.rfind(')');
+    if (close == std::string::npos) continue;
+    std::istringstream fields(stat.substr(close + 2));
+    std::string state;
+    pid_t ppid = 0;
+    fields >> state >> ppid;
+    if (ppid != parent || state == "Z") continue;
+    // Arguments are separated by NUL bytes.
+    const std::string cmdline = slurp(entry.path() / "cmdline");
+    std::vector<std::string> args;
+    std::string arg;
+    for (char c : cmdline) {
+      if (c == '\0') {
+        args.push_back(arg);
+        arg.clear();
+      } else {
+        arg += c;
+      }
+    }
+    // `words` must appear as consecutive arguments.
+    bool all = words.empty();
+    for (std::size_t a = 0; !all && a + words.size() <= args.size(); ++a) {
+      all = std::equal(words.begin(), words.end(), args.begin() + static_cast<std::ptrdiff_t>(a));
+    }
+    if (all) found.push_back(static_cast<pid_t>(std::stoi(name)));
+  }
+  return found;
+}
+
+ProcessWatch::ProcessWatch(int domain_id, const fs::path& profiles_file) {
+  participant_ = std::make_unique<dds::Participant>(
+      dds::ParticipantOptions{.domain_id = domain_id, .profiles_file = profiles_file.string()});
+  chunk_reader_ =
+      participant_->make_reader<msg::TrajectoryChunk>([this](const msg::TrajectoryChunk& chunk) {
+        if (chunk.actor_id() >= 100) return;  // a test's own injected chunks
+        SeenChunk seen{.actor_id = chunk.actor_id(),
+                       .chunk_seq = chunk.chunk_seq(),
+                       .num_steps = chunk.num_steps(),
+                       .policy_version = chunk.policy_version(),
+                       .ends_episode = !chunk.flags().empty() &&
+                                       (chunk.flags().back() & msg::STEP_IS_LAST) != 0,
+                       .time_s = now_s()};
+        std::lock_guard<std::mutex> lock(mutex_);
+        chunks_.push_back(seen);
+      });
+  snapshot_reader_ =
+      participant_->make_reader<msg::PolicySnapshot>([this](const msg::PolicySnapshot& snapshot) {
+        SeenSnapshot seen{.version = snapshot.version(),
+                          .updates = snapshot.updates(),
+                          .bytes = snapshot.params().size(),
+                          .time_s = now_s()};
+        std::lock_guard<std::mutex> lock(mutex_);
+        snapshots_.push_back(seen);
+      });
+  heartbeat_reader_ = participant_->make_reader<msg::Heartbeat>([this](const msg::Heartbeat& beat) {
+    SeenHeartbeat seen{.state = beat.state(),
+                       .env_steps = beat.env_steps(),
+                       .updates = beat.updates(),
+                       .policy_version = beat.policy_version(),
+                       .dropped_messages = beat.dropped_messages(),
+                       .time_s = now_s()};
+    std::lock_guard<std::mutex> lock(mutex_);
+    heartbeats_[{static_cast<std::uint32_t>(beat.role()), beat.id()}] = seen;
+  });
+}
+
+ProcessWatch::~ProcessWatch() {
+  chunk_reader_.reset();
+  snapshot_reader_.reset();
+  heartbeat_reader_.reset();
+  participant_.reset();
+}
+
+std::vector<SeenChunk> ProcessWatch::chunks() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return chunks_;
+}
+
+std::vector<SeenSnapshot> ProcessWatch::snapshots() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return snapshots_;
+}
+
+std::uint64_t ProcessWatch::newest_snapshot() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::uint64_t newest = 0;
+  for (const auto& s : snapshots_) newest = std::max(newest, s.version);
+  return newest;
+}
+
+bool ProcessWatch::heartbeat(std::uint32_t role, std::uint32_t id, SeenHeartbeat& out) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = heartbeats_.find({role, id});
+  if (it == heartbeats_.end()) return false;
+  out = it->second;
+  return true;
+}
+
+std::uint64_t ProcessWatch::min_newest_chunk_version(const std::vector<std::uint32_t>& actors) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::uint64_t low = UINT64_MAX;
+  for (std::uint32_t actor : actors) {
+    std::uint64_t newest = 0;
+    bool any = false;
+    for (auto it = chunks_.rbegin(); it != chunks_.rend(); ++it) {
+      if (it->actor_id == actor) {
+        newest = it->policy_version;
+        any = true;
+        break;
+      }
+    }
+    if (!any) return 0;
+    low = std::min(low, newest);
+  }
+  return actors.empty() ? 0 : low;
+}
+
+std::string tiny_service_config() {
+  return R"(preset: tiny
+run:
+  seed: 3
+env:
+  densities: [0]
+  time_limit_steps: 150
+actor:
+  chunk_length: 16
+  request_after_s: 1
+  heartbeat_s: 0.2
+agent:
+  replay:
+    prefill: 128
+    capacity: 20000
+learner:
+  replay_ratio: 4
+  snapshot_every: 2
+  log_interval_s: 1
+  announce_s: 0.5
+  allowance_slack: 16
+)";
+}
+
+std::vector<std::string> service_args(const std::string& program, const fs::path& config,
+                                      const fs::path& run_dir, int domain_id,
+                                      const fs::path& profiles_file,
+                                      const std::vector<std::string>& overrides) {
+  std::vector<std::string> args = {std::string(INDRIVE_BIN_DIR) + "/" + program,
+                                   "--config",
+                                   config.string(),
+                                   "--run-dir",
+                                   run_dir.string(),
+                                   "--domain",
+                                   std::to_string(domain_id),
+                                   "--dds-profile",
+                                   profiles_file.string()};
+  for (const auto& text : overrides) args.insert(args.end(), {"--set", text});
+  return args;
+}
+
+}  // namespace indrive::testing

@@ -1,0 +1,149 @@
+// Helpers for tests that run the service as real processes: child processes with their output
+// in a log file, a DDS participant that watches what travels on the wire, and readers of the
+// run directory (metrics.jsonl) and of /proc (CPU time, children of a launcher).
+//
+//   ProcessWatch watch(domain, profile);                 // before the processes start
+//   Child learner({bin + "/indrive-learner", ...}, dir / "learner.log");
+//   wait_until(60s, [&] { return watch.newest_snapshot() >= 2; });
+//   learner.signal(SIGKILL);
+#pragma once
+
+#include <sys/types.h>
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "indrive/common/dds.h"
+
+namespace indrive::testing {
+
+using SteadyClock = std::chrono::steady_clock;
+
+// A child process with stdout and stderr appended to a log file; SIGKILLed and reaped when
+// the object dies.
+class Child {
+ public:
+  // Starts argv[0] (a path) with the given arguments; throws std::runtime_error if it cannot.
+  Child(std::vector<std::string> argv, const std::filesystem::path& log);
+  ~Child();
+  Child(const Child&) = delete;
+  Child& operator=(const Child&) = delete;
+
+  // Sends a signal to the process.
+  void signal(int number);
+  // Waits for the exit and returns its exit code, 128 + signal for a signal, -1 on timeout.
+  int wait(std::chrono::milliseconds timeout);
+  // True while the process has not exited.
+  bool running();
+  pid_t pid() const { return pid_; }
+
+ private:
+  pid_t pid_ = -1;
+};
+
+// Polls `condition` every 50 ms until it holds or `timeout` passes; returns its last value.
+bool wait_until(std::chrono::milliseconds timeout, const std::function<bool()>& condition);
+
+// Seconds since `start`.
+double seconds_since(SteadyClock::time_point start);
+
+// The whole text of a file ("" when it is missing).
+std::string slurp(const std::filesystem::path& path);
+
+// Every line of a metrics.jsonl file, parsed, in order (lines that do not parse are skipped:
+// a killed learner may leave a partial last line).
+std::vector<nlohmann::json> read_metrics(const std::filesystem::path& path);
+
+// Whether a metrics line keeps the replay ratio: no more updates than are due for its env
+// steps (the learner never trains ahead), and env steps at most `lead_steps` ahead of what its
+// updates cover (the actors' slack and the steps in flight).
+bool keeps_ratio(const nlohmann::json& line, double ratio, double steps_per_update,
+                 double lead_steps);
+
+// User plus system CPU time of a process so far, in seconds (-1 when it is gone).
+double cpu_seconds(pid_t pid);
+
+// Pids of the live children of `parent` whose command line holds `words` as consecutive
+// arguments, e.g. {"--id", "0"}.
+std::vector<pid_t> child_pids(pid_t parent, const std::vector<std::string>& words);
+
+// One TrajectoryChunk as the watch saw it.
+struct SeenChunk {
+  std::uint32_t actor_id = 0;
+  std::uint64_t chunk_seq = 0;
+  std::uint32_t num_steps = 0;
+  std::uint64_t policy_version = 0;
+  bool ends_episode = false;  // its last step is the last step of an episode
+  double time_s = 0.0;        // seconds since the watch started
+};
+
+// One PolicySnapshot as the watch saw it.
+struct SeenSnapshot {
+  std::uint64_t version = 0;
+  std::uint64_t updates = 0;
+  std::size_t bytes = 0;
+  double time_s = 0.0;
+};
+
+// The newest Heartbeat of one process.
+struct SeenHeartbeat {
+  std::string state;
+  std::uint64_t env_steps = 0;
+  std::uint64_t updates = 0;
+  std::uint64_t policy_version = 0;
+  std::uint64_t dropped_messages = 0;
+  double time_s = 0.0;
+};
+
+// A DDS participant of the test that records the chunks of actors (ids below 100), every
+// snapshot and the newest heartbeat of each process, and can write messages of its own.
+class ProcessWatch {
+ public:
+  ProcessWatch(int domain_id, const std::filesystem::path& profiles_file);
+  ~ProcessWatch();
+
+  std::vector<SeenChunk> chunks();
+  std::vector<SeenSnapshot> snapshots();
+  // Newest snapshot version seen (0: none).
+  std::uint64_t newest_snapshot();
+  // The newest heartbeat of (role, id), if one came.
+  bool heartbeat(std::uint32_t role, std::uint32_t id, SeenHeartbeat& out);
+  // The lowest over `actors` of the newest policy version in their chunks (0 if one sent none).
+  std::uint64_t min_newest_chunk_version(const std::vector<std::uint32_t>& actors);
+  double now_s() const { return seconds_since(start_); }
+  dds::Participant& participant() { return *participant_; }
+
+ private:
+  SteadyClock::time_point start_ = SteadyClock::now();
+  std::unique_ptr<dds::Participant> participant_;
+  std::unique_ptr<dds::Reader<msg::TrajectoryChunk>> chunk_reader_;
+  std::unique_ptr<dds::Reader<msg::PolicySnapshot>> snapshot_reader_;
+  std::unique_ptr<dds::Reader<msg::Heartbeat>> heartbeat_reader_;
+  std::mutex mutex_;
+  std::vector<SeenChunk> chunks_;
+  std::vector<SeenSnapshot> snapshots_;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, SeenHeartbeat> heartbeats_;
+};
+
+// The YAML of the tiny-preset service runs of these tests: 16-step chunks, a 128-step prefill,
+// replay ratio 4 (one update per 32 env steps, so that a loaded machine still trains often
+// enough), a snapshot every 2 updates, metrics every second, fast announces and re-requests. Tests
+// change single keys with --set.
+std::string tiny_service_config();
+
+// Command line of a service executable (indrive-learner or indrive-actor) of a test run.
+std::vector<std::string> service_args(const std::string& program,
+                                      const std::filesystem::path& config,
+                                      const std::filesystem::path& run_dir, int domain_id,
+                                      const std::filesystem::path& profiles_file,
+                                      const std::vector<std::string>& overrides = {});
+
+}  // namespace indrive::testing
