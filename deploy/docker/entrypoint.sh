@@ -43,7 +43,7 @@ fi
 
 if [ -n "$server" ]; then
   address=$(resolve "$host")
-  profile=/tmp/indrive-discovery-client.xml
+  profile="${TMPDIR:-/tmp}/indrive-discovery-client.xml"
   sed -e "s|<address>127.0.0.1</address>|<address>$address</address>|" \
       -e "s|<port>11811</port>|<port>$port</port>|" \
       "$data/deploy/dds/discovery_server.xml" > "$profile"

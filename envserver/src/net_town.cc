@@ -194,7 +194,9 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
     for (const auto& file : {nodes, edges}) {
       if (!fs::is_regular_file(file, ec)) {
         throw MapError("built-in town source '" + file.string() +
-                       "' is missing; set INDRIVE_ENV_DATA_DIR to the envserver/data folder");
+                       "' is missing; set INDRIVE_DATA_DIR to a folder that holds envserver/data/ "
+                       "(an installed share/indrive), or INDRIVE_ENV_DATA_DIR to the "
+                       "envserver/data folder itself");
       }
     }
     std::vector<std::string> argv = {netconvert.string(), "--node-files", nodes.string(),
