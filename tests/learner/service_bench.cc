@@ -38,6 +38,7 @@
 #include <sstream>
 #include <thread>
 
+#include "indrive/common/agent/config.h"
 #include "indrive/common/dds.h"
 #include "indrive/msg/policyPubSubTypes.h"
 #include "testing.h"
@@ -267,7 +268,8 @@ struct Result {
   double window_s = 0.0;
   double env_steps_per_s = 0.0;
   double updates_per_s = 0.0;
-  double replay_ratio = 0.0;  // from the learner's last metrics line
+  double replay_ratio = 0.0;      // inside the window
+  double run_replay_ratio = 0.0;  // the learner's figure over the whole run
   double publish_share = 0.0;
   double wait_share = 0.0;
   std::uint64_t chunks = 0;
@@ -284,6 +286,10 @@ struct Options {
   double window_s = 15.0;
   double cpu_window_s = 40.0;
   fs::path keep_logs;  // empty: logs go with the temporary folder
+  std::vector<int> actor_counts = {1, 2};
+  // async for every preset; limited (the replay ratio holds) for tiny only: cpu updates take
+  // seconds, so a rate-limited cpu run measures the update time, not the service.
+  std::vector<std::string> modes = {"async", "limited"};
 };
 
 std::string config_text(const Scenario& scenario) {
@@ -385,30 +391,35 @@ Result run_scenario(const Scenario& scenario, const Options& options, int domain
     return result;
   }
   std::this_thread::sleep_for(2s);
-  const double window_start_s = unix_now_s();
-  std::this_thread::sleep_for(std::chrono::duration<double>(window_s));
-  const double window_end_s = unix_now_s();
-  if (!alive()) {
-    result.error = "a process exited during the measurement\n" + all_logs();
+  // (a) throughput from the learner's own heartbeats: it sends them between updates, so the
+  // window runs from the newest one at its start to the first one at least window_s later.
+  const LearnerBeat first = *watcher.newest_learner();
+  std::optional<LearnerBeat> last;
+  const auto window_deadline = Clock::now() + std::chrono::duration<double>(window_s) + 120s;
+  while (Clock::now() < window_deadline) {
+    if (!alive()) {
+      result.error = "a process exited during the measurement\n" + all_logs();
+      return result;
+    }
+    const LearnerBeat newest = *watcher.newest_learner();
+    if (newest.wall_s - first.wall_s >= window_s) {
+      last = newest;
+      break;
+    }
+    std::this_thread::sleep_for(100ms);
+  }
+  if (!last) {
+    result.error = "no learner heartbeat closed the window\n" + all_logs();
     return result;
   }
-
-  // (a) throughput from the learner's own heartbeats inside the window.
-  const auto beats = watcher.learner_beats();
-  std::optional<LearnerBeat> first, last;
-  for (const auto& beat : beats) {
-    if (beat.wall_s < window_start_s || beat.wall_s > window_end_s) continue;
-    if (!first) first = beat;
-    last = beat;
-  }
-  if (!first || last->wall_s - first->wall_s < 0.5 * window_s) {
-    result.error = "too few learner heartbeats in the window\n" + all_logs();
-    return result;
-  }
-  result.window_s = last->wall_s - first->wall_s;
-  result.env_steps_per_s =
-      static_cast<double>(last->env_steps - first->env_steps) / result.window_s;
-  result.updates_per_s = static_cast<double>(last->updates - first->updates) / result.window_s;
+  result.window_s = last->wall_s - first.wall_s;
+  const auto steps = static_cast<double>(last->env_steps - first.env_steps);
+  const auto updates = static_cast<double>(last->updates - first.updates);
+  result.env_steps_per_s = steps / result.window_s;
+  result.updates_per_s = updates / result.window_s;
+  // Replayed steps per env step inside the window (batch x length replayed per update).
+  const agent::AgentConfig agent = agent::preset(scenario.preset);
+  if (steps > 0.0) result.replay_ratio = updates * agent.replay.batch * agent.replay.length / steps;
 
   // (c) the actors' own time accounting, printed when they stop.
   for (auto& actor : actors) actor->stop(30s);
@@ -428,14 +439,14 @@ Result run_scenario(const Scenario& scenario, const Options& options, int domain
   result.wait_share = total_s > 0.0 ? wait_s / total_s : 0.0;
   learner->stop(60s);
 
-  // The learner's own replay-ratio figure from its last metrics line.
+  // The learner's own replay-ratio figure (whole run, prefill included) from its metrics.
   std::ifstream metrics(run_dir / "metrics.jsonl");
   std::string line, newest;
   while (std::getline(metrics, line)) {
     if (!line.empty()) newest = line;
   }
   if (!newest.empty())
-    result.replay_ratio = nlohmann::json::parse(newest).value("replay_ratio", 0.0);
+    result.run_replay_ratio = nlohmann::json::parse(newest).value("replay_ratio", 0.0);
 
   // (b) snapshot size and latencies; versions the benchmark's reader missed are skipped.
   const auto snapshots = watcher.snapshots();
@@ -466,22 +477,28 @@ std::string latency_text(const std::vector<double>& values) {
 void print_table(const std::vector<Result>& results, const Options& options) {
   std::printf(
       "\nService benchmark: indrive-learner + indrive-actor processes on this host, DDS "
-      "profile %s,\ntown01 at traffic density 10, %u hardware threads. Env steps/s are "
+      "profile %s,\ntown01 at traffic density 10, %u hardware threads, OMP_WAIT_POLICY=%s. Env "
+      "steps/s are "
       "steps received by the learner\nwhile it trains (its heartbeats, over the "
       "window); rate-limited runs keep replay ratio 32.\n\n",
-      options.profile.filename().c_str(), std::thread::hardware_concurrency());
-  std::printf("%-28s %8s %12s %10s %10s %12s %10s %8s\n", "scenario", "window_s", "env_steps/s",
-              "per_actor", "updates/s", "replay_ratio", "publish_%", "wait_%");
+      options.profile.filename().c_str(), std::thread::hardware_concurrency(),
+      std::getenv("OMP_WAIT_POLICY"));
+  std::printf("%-28s %8s %12s %10s %10s %8s %8s %10s %8s\n", "scenario", "window_s", "env_steps/s",
+              "per_actor", "updates/s", "ratio_w", "ratio_r", "publish_%", "wait_%");
   for (const Result& result : results) {
     if (!result.error.empty()) {
       std::printf("%-28s FAILED (see below)\n", result.scenario.name().c_str());
       continue;
     }
-    std::printf("%-28s %8.1f %12.1f %10.1f %10.2f %12.1f %10.2f %8.1f\n",
+    std::printf("%-28s %8.1f %12.1f %10.1f %10.3f %8.2f %8.2f %10.2f %8.1f\n",
                 result.scenario.name().c_str(), result.window_s, result.env_steps_per_s,
                 result.env_steps_per_s / result.scenario.actors, result.updates_per_s,
-                result.replay_ratio, 100.0 * result.publish_share, 100.0 * result.wait_share);
+                result.replay_ratio, result.run_replay_ratio, 100.0 * result.publish_share,
+                100.0 * result.wait_share);
   }
+  std::printf(
+      "\nratio_w: replayed steps per env step inside the window; ratio_r: the "
+      "learner's figure over the whole run (prefill included).");
   std::printf(
       "\npublish_%%: time the actors spent compressing and writing TrajectoryChunks, as a "
       "share of their run time\n(ActorStats publish_s / total_s, summed over actors); "
@@ -522,27 +539,32 @@ int main(int argc, char** argv) {
   app.add_option("--cpu-window-s", options.cpu_window_s,
                  "measurement window of cpu runs (seconds; its updates are slow)");
   app.add_option("--keep-logs", options.keep_logs, "copy the processes' logs to this folder");
+  app.add_option("--actors", options.actor_counts, "actor counts to run")->delimiter(',');
+  app.add_option("--modes", options.modes, "async, limited")->delimiter(',');
   CLI11_PARSE(app, argc, argv);
 
   // The children get the profile by flag; an inherited default would make them refuse it.
-  ::unsetenv(dds::kProfilesEnvVar);
+  ::unsetenv(indrive::dds::kProfilesEnvVar);
+  // As `indrive launch` does: idle OpenMP threads sleep instead of spinning on cores the other
+  // processes need. OMP_WAIT_POLICY=active in the environment measures the difference.
+  ::setenv("OMP_WAIT_POLICY", "passive", /*overwrite=*/0);
   std::vector<Scenario> scenarios;
+  auto wanted = [&](const char* mode) {
+    return std::find(options.modes.begin(), options.modes.end(), mode) != options.modes.end();
+  };
   for (const auto& preset : options.presets) {
     // cpu updates take seconds: a snapshot after each, so the window holds enough of them.
     const int snapshot_every = preset == "cpu" ? 1 : 10;
-    for (int actors : {1, 2}) {
-      scenarios.push_back(
-          {.preset = preset, .actors = actors, .async = true, .snapshot_every = snapshot_every});
-    }
-    if (preset == "tiny") {
-      for (int actors : {1, 2}) {
+    for (bool async : {true, false}) {
+      if (!wanted(async ? "async" : "limited") || (!async && preset == "cpu")) continue;
+      for (int actors : options.actor_counts) {
         scenarios.push_back(
-            {.preset = preset, .actors = actors, .async = false, .snapshot_every = snapshot_every});
+            {.preset = preset, .actors = actors, .async = async, .snapshot_every = snapshot_every});
       }
     }
   }
 
-  const int domain = testing::unique_domain_id();
+  const int domain = indrive::testing::unique_domain_id();
   std::vector<Result> results;
   bool failed = false;
   for (const Scenario& scenario : scenarios) {
