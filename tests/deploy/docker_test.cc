@@ -256,6 +256,8 @@ TEST_F(InstalledTest, DockerfileBuildsLikeSetupAndShipsEveryRuntimeLibrary) {
   // Packages every debian:12 image has.
   const std::set<std::string> base = {"libc6", "libgcc-s1", "libstdc++6", "zlib1g", "libzstd1"};
   std::set<std::string> missing;
+  std::set<std::string> seen;  // sonames already mapped (the programs share most)
+  int mapped = 0;
   for (const char* program : {"indrive", "indrive-actor", "indrive-learner", "indrive-env"}) {
     const Output libraries = run("ldd " + quote((prefix() / "bin" / program).string()));
     ASSERT_EQ(libraries.status, 0) << libraries.text;
@@ -265,6 +267,7 @@ TEST_F(InstalledTest, DockerfileBuildsLikeSetupAndShipsEveryRuntimeLibrary) {
     std::istringstream names(needed.text);
     std::string soname;
     while (names >> soname) {
+      if (!seen.insert(soname).second) continue;
       const std::regex line("\\s" + std::regex_replace(soname, std::regex(R"([.+])"), R"(\$&)") +
                             R"( => (\S+))");
       std::smatch match;
@@ -273,15 +276,19 @@ TEST_F(InstalledTest, DockerfileBuildsLikeSetupAndShipsEveryRuntimeLibrary) {
       const std::string real = fs::canonical(match[1].str()).string();
       std::string lib_spelling = real;
       if (lib_spelling.starts_with("/usr/lib/")) lib_spelling = lib_spelling.substr(4);
-      const Output owner = run("dpkg-query -S " + quote(real) + " || dpkg-query -S " +
-                               quote(lib_spelling) + " || dpkg-query -S " + quote(match[1].str()));
+      const Output owner =
+          run("dpkg-query -S " + quote(real) + " 2>/dev/null || dpkg-query -S " +
+              quote(lib_spelling) + " 2>/dev/null || dpkg-query -S " + quote(match[1].str()));
       if (owner.status != 0) continue;  // not from a package (e.g. a local build)
+      ++mapped;
       std::string package = owner.text.substr(0, owner.text.find_first_of(":,"));
       if (!packages.contains(package) && !base.contains(package)) {
         missing.insert(package + " (" + soname + ")");
       }
     }
   }
+  // Fast DDS, OpenCV, SUMO, yaml-cpp, pugixml, ...: the check must have seen them.
+  EXPECT_GE(mapped, 10) << "too few libraries mapped to packages for the check to mean much";
   EXPECT_TRUE(missing.empty()) << "add to the Dockerfile's runtime stage: "
                                << ::testing::PrintToString(missing);
 }
