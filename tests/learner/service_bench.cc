@@ -10,8 +10,13 @@
 //   (c) chunk transport overhead: time the actors spent compressing and writing chunks as a
 //       share of their run time (from each actor's stop line).
 //
-//   build/bin/learner_service_bench                       # tiny and cpu presets, ~4-5 minutes
-//   build/bin/learner_service_bench --presets tiny --window-s 10
+//   build/bin/learner_service_bench                  # tiny async + rate-limited, cpu rate-limited
+//   build/bin/learner_service_bench --presets tiny   # about 2.5 minutes
+//   build/bin/learner_service_bench --presets cpu --cpu-modes async,limited --actors 1
+// A full run takes about 5 minutes on a quiet 2-core host (11 on a heavily loaded one): each
+// scenario starts fresh processes, waits for training (and, rate-limited, for the learner to
+// catch up with the prefill), then measures. Children get OMP_WAIT_POLICY=passive unless the
+// environment sets it, as `indrive launch` does.
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
