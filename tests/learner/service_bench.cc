@@ -424,6 +424,8 @@ Result run_scenario(const Scenario& scenario, const Options& options, int domain
   std::this_thread::sleep_for(2s);
   // (a) throughput from the learner's own heartbeats: it sends them between updates, so the
   // window runs from the newest one at its start to the first one at least window_s later.
+  // Steps arrive a chunk at a time, so the window also waits (up to 2 minutes more) for a few
+  // chunks: a slow rate-limited learner lets only one chunk through every few updates.
   const LearnerBeat first = *watcher.newest_learner();
   std::optional<LearnerBeat> last;
   const auto window_deadline = Clock::now() + std::chrono::duration<double>(window_s) + 120s;
@@ -435,7 +437,7 @@ Result run_scenario(const Scenario& scenario, const Options& options, int domain
     const LearnerBeat newest = *watcher.newest_learner();
     if (newest.wall_s - first.wall_s >= window_s) {
       last = newest;
-      break;
+      if (newest.env_steps - first.env_steps >= 3 * kChunkLength) break;
     }
     std::this_thread::sleep_for(100ms);
   }
