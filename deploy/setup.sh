@@ -4,6 +4,10 @@
 #   bash deploy/setup.sh run    # install what is missing, build, run the main job (tiny preset)
 #   bash deploy/setup.sh test   # install what is missing, build, run the test suite
 #   bash deploy/setup.sh build  # install what is missing and build only
+#   bash deploy/setup.sh deps   # install what is missing only (the Docker image's first layer)
+#
+# INDRIVE_CMAKE_ARGS adds configure options, e.g. "-DINDRIVE_NATIVE=OFF" for binaries that must
+# run on other CPUs (deploy/docker/Dockerfile sets it).
 #
 # Idempotent: installs only missing packages (as root directly, otherwise through sudo) and
 # rebuilds only what changed. The build goes to build/ (Release).
@@ -57,7 +61,8 @@ build() {
   jobs=$(nproc)
   if [ ! -f "$build_dir/build.ninja" ]; then
     say "configuring into $build_dir"
-    cmake -S "$root" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release
+    # shellcheck disable=SC2086  # INDRIVE_CMAKE_ARGS is a list of options
+    cmake -S "$root" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release ${INDRIVE_CMAKE_ARGS:-}
   fi
   say "building with $jobs jobs"
   cmake --build "$build_dir" -j "$jobs"
@@ -74,8 +79,9 @@ run_main() {
 }
 
 case "$mode" in
+  deps) install_missing ;;
   build) install_missing; build ;;
   test) install_missing; build; run_tests ;;
   run) install_missing; build; run_main ;;
-  *) echo "usage: $0 run|test|build" >&2; exit 2 ;;
+  *) echo "usage: $0 run|test|build|deps" >&2; exit 2 ;;
 esac

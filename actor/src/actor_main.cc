@@ -49,6 +49,10 @@ int main(int argc, char** argv) {
     }
     if (continuous) options.overrides.push_back("eval.continuous=true");
     const auto config = indrive::actor::ServiceConfig::resolve(options);
+    if (options.check_only) {
+      std::printf("%s\n", indrive::actor::check_summary(config).c_str());
+      return 0;
+    }
     if (evaluate) {
       indrive::actor::Evaluator evaluator(config, id, of);
       return evaluator.run(stop);

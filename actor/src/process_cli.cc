@@ -2,6 +2,8 @@
 
 #include <signal.h>
 
+#include "indrive/common/dds.h"
+
 namespace indrive::actor {
 namespace {
 
@@ -21,6 +23,16 @@ void add_service_options(CLI::App& app, ServiceOptions& options, std::string& lo
   app.add_option("--set", options.overrides, "config override key=value (repeatable)");
   app.add_option("--log-level", log_level, "debug, info, warn, error or off")
       ->capture_default_str();
+  app.add_flag("--check-config", options.check_only,
+               "resolve the configuration and DDS profile, print a summary and exit");
+}
+
+std::string check_summary(const ServiceConfig& config) {
+  const agent::AgentConfig agent = config.agent();
+  return "config ok: run '" + config.run_id() + "', preset " + agent.preset + ", phase " +
+         std::string(agent::to_string(agent.phase)) + ", domain " +
+         std::to_string(config.domain_id()) + ", DDS profiles " +
+         dds::resolve_profiles_file(config.dds_profile()).string();
 }
 
 const std::atomic<bool>& install_stop_signals() {

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <set>
 
+#include "indrive/common/data_path.h"
 #include "indrive/common/dds.h"
 
 namespace indrive::actor {
@@ -157,9 +158,9 @@ ServiceConfig ServiceConfig::resolve(const ServiceOptions& options) {
   }
   service.dds_profile_ = service.config_.get<std::string>("dds.profiles_file");
   if (service.dds_profile_.empty() && std::getenv(dds::kProfilesEnvVar) == nullptr) {
-    // Neither flag, config nor environment names one: use the shipped single-host profile.
-    service.dds_profile_ =
-        (std::filesystem::path(INDRIVE_SOURCE_DIR) / "deploy/dds/single_host.xml").string();
+    // Neither flag, config nor environment names one: use the shipped single-host profile,
+    // found under the data roots (installed tree or source tree, see data_path.h).
+    service.dds_profile_ = find_data("deploy/dds/single_host.xml").string();
   }
   agent::validate(service.agent());
   return service;

@@ -202,6 +202,7 @@ struct TrainingActor::Impl {
     restart_state = true;
     stats.policy_version = snapshot->version();
     ++stats.snapshots_loaded;
+    heartbeat("running");  // announces the version in use at once (publish-to-use latency)
     INDRIVE_LOG_AT(first ? log::Level::kInfo : log::Level::kDebug, "actor")
         << "acting with snapshot v" << snapshot->version() << " (" << snapshot->params().size()
         << " bytes, loaded in " << seconds_since(start) * 1000.0 << " ms)";
@@ -336,7 +337,8 @@ struct TrainingActor::Impl {
     INDRIVE_LOG(kInfo, "actor") << "actor " << id << " stops: " << stats.env_steps << " steps, "
                                 << stats.chunks << " chunks, " << stats.episodes
                                 << " episodes, policy v" << stats.policy_version << ", waited "
-                                << stats.wait_s << " s of " << stats.total_s << " s";
+                                << stats.wait_s << " s of " << stats.total_s
+                                << " s, publishing took " << stats.publish_s << " s";
   }
 
   // Writes coverage/actor-<id>.csv of the run atomically; a failure is logged, never fatal:

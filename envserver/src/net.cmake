@@ -19,5 +19,4 @@ target_sources(indrive_envserver PRIVATE
 )
 target_link_libraries(indrive_envserver PRIVATE pugixml::pugixml)
 target_compile_definitions(indrive_envserver PRIVATE
-  INDRIVE_ENV_DATA_DIR="${CMAKE_CURRENT_LIST_DIR}/../data"
   INDRIVE_NETGENERATE_BINARY="${NETGENERATE_BINARY}")

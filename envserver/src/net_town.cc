@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "indrive/common/checksum.h"
+#include "indrive/common/data_path.h"
 #include "indrive/common/log.h"
 #include "indrive/envserver/town.h"
 
@@ -61,7 +62,13 @@ std::string env_or_empty(const char* name) {
 fs::path data_dir(const TownOptions& options) {
   if (!options.data_dir.empty()) return options.data_dir;
   if (auto env = env_or_empty("INDRIVE_ENV_DATA_DIR"); !env.empty()) return env;
-  return INDRIVE_ENV_DATA_DIR;
+  // Otherwise the shared data roots: $INDRIVE_DATA_DIR, an installed share/indrive, the
+  // source tree (indrive/common/data_path.h).
+  try {
+    return find_data("envserver/data");
+  } catch (const DataPathError& error) {
+    throw MapError(std::string("town data not found: ") + error.what());
+  }
 }
 
 fs::path cache_dir(const TownOptions& options) {
@@ -187,7 +194,9 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
     for (const auto& file : {nodes, edges}) {
       if (!fs::is_regular_file(file, ec)) {
         throw MapError("built-in town source '" + file.string() +
-                       "' is missing; set INDRIVE_ENV_DATA_DIR to the envserver/data folder");
+                       "' is missing; set INDRIVE_DATA_DIR to a folder that holds envserver/data/ "
+                       "(an installed share/indrive), or INDRIVE_ENV_DATA_DIR to the "
+                       "envserver/data folder itself");
       }
     }
     std::vector<std::string> argv = {netconvert.string(), "--node-files", nodes.string(),

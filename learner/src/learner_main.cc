@@ -18,6 +18,10 @@ int main(int argc, char** argv) {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     const auto& stop = indrive::actor::install_stop_signals();
     const auto config = indrive::actor::ServiceConfig::resolve(options);
+    if (options.check_only) {
+      std::printf("%s\n", indrive::actor::check_summary(config).c_str());
+      return 0;
+    }
     indrive::learner::Learner learner(config);
     learner.on_progress([](const std::string& line) {
       std::printf("%s\n", line.c_str());

@@ -1,5 +1,6 @@
 // The command line both service executables share (fixed by `indrive launch`):
 //   --config FILE --run-dir DIR --domain N [--dds-profile XML] [--set key=value]...
+//   [--check-config]
 // plus a stop flag that SIGINT and SIGTERM set.
 #pragma once
 
@@ -13,6 +14,11 @@ namespace indrive::actor {
 
 // Adds the shared options to `app`, writing into `options` and `log_level`.
 void add_service_options(CLI::App& app, ServiceOptions& options, std::string& log_level);
+
+// One line that says what a process would run with (run id, preset, phase, domain, DDS
+// profile); throws dds::DdsError when the profiles file cannot be found. Printed by
+// --check-config, which validates a command line without starting anything.
+std::string check_summary(const ServiceConfig& config);
 
 // Installs SIGINT/SIGTERM handlers that set the returned flag (once per process).
 const std::atomic<bool>& install_stop_signals();

@@ -29,6 +29,7 @@ struct ServiceOptions {
   int domain_id = -1;                  // --domain; -1: the config's dds.domain_id
   std::string dds_profile;             // --dds-profile; empty: config, env var, then built-in
   std::vector<std::string> overrides;  // --set key=value, in order
+  bool check_only = false;             // --check-config: resolve, summarise and exit
 };
 
 // Declares every key of a service run (agent.*, env.*, actor.*, learner.*, run.*, dds.*) and

@@ -1,0 +1,56 @@
+#!/bin/sh
+# Entrypoint of the InDRiVE image: picks the DDS profile, then runs the command.
+#
+#   INDRIVE_DISCOVERY_SERVER=host:port  every participant is a client of that discovery server
+#                                       (deploy/dds/discovery_server.xml with its address);
+#   INDRIVE_DISCOVERY_SERVER empty      UDP with multicast discovery (deploy/dds/default.xml).
+# Shared memory (single_host.xml) is never used: it does not cross containers.
+#
+#   entrypoint.sh discovery-server      runs the discovery server itself on this container's
+#                                       address and the port of INDRIVE_DISCOVERY_SERVER.
+set -eu
+
+data=${INDRIVE_DATA_DIR:-$(cd "$(dirname "$0")/../.." && pwd)}
+server=${INDRIVE_DISCOVERY_SERVER:-}
+host=${server%:*}
+port=11811
+case "$server" in *:*) port=${server##*:} ;; esac
+
+# Resolves a host name to an IPv4 address, waiting for the network's DNS (up to 60 s).
+resolve() {
+  tries=0
+  while :; do
+    address=$(getent ahostsv4 "$1" 2>/dev/null | awk 'NR == 1 { print $1 }')
+    if [ -n "$address" ]; then
+      echo "$address"
+      return 0
+    fi
+    tries=$((tries + 1))
+    if [ "$tries" -ge 60 ]; then
+      echo "entrypoint: cannot resolve discovery server '$1'; start it or set" \
+           "INDRIVE_DISCOVERY_SERVER=host:port (empty for multicast discovery)" >&2
+      return 1
+    fi
+    sleep 1
+  done
+}
+
+if [ "${1:-}" = "discovery-server" ]; then
+  own=$(resolve "$(cat /etc/hostname)")
+  echo "entrypoint: discovery server on $own:$port"
+  exec fastdds discovery -i 0 -l "$own" -p "$port"
+fi
+
+if [ -n "$server" ]; then
+  address=$(resolve "$host")
+  profile="${TMPDIR:-/tmp}/indrive-discovery-client.xml"
+  sed -e "s|<address>127.0.0.1</address>|<address>$address</address>|" \
+      -e "s|<port>11811</port>|<port>$port</port>|" \
+      "$data/deploy/dds/discovery_server.xml" > "$profile"
+  echo "entrypoint: DDS through the discovery server $address:$port" >&2
+else
+  profile="$data/deploy/dds/default.xml"
+  echo "entrypoint: DDS over UDP with multicast discovery" >&2
+fi
+export FASTRTPS_DEFAULT_PROFILES_FILE="$profile"
+exec "$@"
