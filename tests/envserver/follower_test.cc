@@ -58,8 +58,8 @@ Env& env_for(const std::string& town) {
 
 class Feasibility : public ::testing::TestWithParam<Case> {
  protected:
-  // Closes the simulations while libtraci's own statics (its connection registry) still
-  // exist: left to static destruction, the Envs outlived them and the binary crashed at exit.
+  // Closes the simulations one after another inside the test run, where a failure shows up as
+  // a test error, rather than in static destruction after main.
   static void TearDownTestSuite() { all_envs().clear(); }
 };
 
