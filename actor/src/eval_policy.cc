@@ -102,8 +102,8 @@ class OraclePolicy final : public EpisodePolicy {
     const auto& others = env.traffic_boxes();
     estimate_velocities(others, env.config().ego.dt_s);
     const double ahead_m = options_.min_gap_m + options_.headway_s * result.ego.speed_mps;
-    // Inside a junction the ego is committed: crawling there only keeps it in the crossing
-    // paths longer and lets cars behind, which SUMO no longer links to it, run into it.
+    // Inside a junction with a car close behind, the ego is committed: coasting there lets
+    // that car, which SUMO may no longer link to the turning ego, run into it.
     const bool committed = options_.clear_junction && env.events().road().in_junction &&
                            follower_behind(env.ego_box(), others, options_.follower_gap_m);
     const bool yield =
