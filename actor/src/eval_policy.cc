@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <numbers>
 #include <optional>
 #include <random>
 
@@ -101,9 +102,14 @@ class OraclePolicy final : public EpisodePolicy {
     const auto& others = env.traffic_boxes();
     estimate_velocities(others, env.config().ego.dt_s);
     const double ahead_m = options_.min_gap_m + options_.headway_s * result.ego.speed_mps;
-    const bool yield = leader_ahead(route, s_m_, others, ahead_m, options_.corridor_m) ||
-                       conflict_ahead(route, env.ego_box(), s_m_, result.ego.speed_mps, others,
-                                      velocities_, options_);
+    // Inside a junction with a car close behind, the ego is committed: coasting there lets
+    // that car, which SUMO may no longer link to the turning ego, run into it.
+    const bool committed = options_.clear_junction && env.events().road().in_junction &&
+                           follower_behind(env.ego_box(), others, options_.follower_gap_m);
+    const bool yield =
+        leader_ahead(route, s_m_, others, ahead_m, options_.corridor_m) ||
+        (!committed && conflict_ahead(route, env.ego_box(), s_m_, result.ego.speed_mps, others,
+                                      velocities_, options_, yaw_rates_));
     previous_.assign(others.begin(), others.end());
     if (!yield) return action;
     // Keep the follower's steering, drop the throttle: coasting is the only brake there is.
@@ -115,6 +121,7 @@ class OraclePolicy final : public EpisodePolicy {
   // most 8.3 m/s, a car moves under 1 m per step, so the nearest within 2 m is the same car).
   void estimate_velocities(std::span<const env::Box> others, double dt_s) {
     velocities_.assign(others.size(), Eigen::Vector2d::Zero());
+    yaw_rates_.assign(others.size(), 0.0);
     for (std::size_t i = 0; i < others.size(); ++i) {
       const Eigen::Vector2d now(others[i].pose.x_m, others[i].pose.y_m);
       double best = 2.0;
@@ -124,6 +131,7 @@ class OraclePolicy final : public EpisodePolicy {
         if (distance < best) {
           best = distance;
           velocities_[i] = (now - then) / dt_s;
+          yaw_rates_[i] = env::wrap_angle(others[i].pose.yaw_rad - before.pose.yaw_rad) / dt_s;
         }
       }
     }
@@ -134,6 +142,7 @@ class OraclePolicy final : public EpisodePolicy {
   double s_m_ = 0.0;
   std::vector<env::Box> previous_;
   std::vector<Eigen::Vector2d> velocities_;
+  std::vector<double> yaw_rates_;  // rad/s, counter-clockwise positive, one per box
 };
 
 class RandomPolicy final : public EpisodePolicy {
@@ -339,8 +348,11 @@ bool leader_ahead(const env::Route& route, double ego_s_m, std::span<const env::
 
 bool conflict_ahead(const env::Route& route, const env::Box& ego, double ego_s_m,
                     double ego_speed_mps, std::span<const env::Box> others,
-                    std::span<const Eigen::Vector2d> velocities, const OracleOptions& options) {
+                    std::span<const Eigen::Vector2d> velocities, const OracleOptions& options,
+                    std::span<const double> yaw_rates) {
   INDRIVE_CHECK_EQ(others.size(), velocities.size());
+  INDRIVE_CHECK(yaw_rates.empty() || yaw_rates.size() == others.size())
+      << yaw_rates.size() << " yaw rates for " << others.size() << " boxes";
   const double cos_yaw = std::cos(ego.pose.yaw_rad);
   const double sin_yaw = std::sin(ego.pose.yaw_rad);
   const double speed = std::max(ego_speed_mps, options.min_plan_speed_mps);
@@ -353,16 +365,43 @@ bool conflict_ahead(const env::Route& route, const env::Box& ego, double ego_s_m
     if (forward < 0.0) continue;
     // Standing cars are the leader test's business; predicting them here only blocks the ego
     // beside cars that wait at a junction for it.
-    if (velocities[i].norm() < 0.5) continue;
+    const double other_speed = velocities[i].norm();
+    if (other_speed < 0.5) continue;
+    // A turning car keeps its turn rate until it has turned a right angle (the end of any
+    // turn at a junction); a straight-line guess misses the car turning into the ego's road.
+    const double rate = yaw_rates.empty() ? 0.0
+                                          : std::clamp(yaw_rates[i], -options.max_yaw_rate_rps,
+                                                       options.max_yaw_rate_rps);
+    double heading = std::atan2(velocities[i].y(), velocities[i].x());
+    double turned = 0.0;
+    env::Box other_then = other;
     for (double t = 0.0; t <= options.horizon_s + 1e-9; t += kSampleS) {
       env::Box ego_then = ego;
       ego_then.pose = route.pose_at(ego_s_m + speed * t);
       ego_then.length_m += 2.0 * options.clearance_m;
       ego_then.width_m += 2.0 * options.clearance_m;
-      env::Box other_then = other;
-      other_then.pose.x_m += velocities[i].x() * t;
-      other_then.pose.y_m += velocities[i].y() * t;
       if (env::boxes_overlap(ego_then, other_then)) return true;
+      other_then.pose.x_m += other_speed * std::cos(heading) * kSampleS;
+      other_then.pose.y_m += other_speed * std::sin(heading) * kSampleS;
+      if (std::abs(turned) < 0.5 * std::numbers::pi) {
+        heading += rate * kSampleS;
+        turned += rate * kSampleS;
+        other_then.pose.yaw_rad += rate * kSampleS;
+      }
+    }
+  }
+  return false;
+}
+
+bool follower_behind(const env::Box& ego, std::span<const env::Box> others, double gap_m) {
+  const Eigen::Vector2d f(std::cos(ego.pose.yaw_rad), std::sin(ego.pose.yaw_rad));
+  for (const env::Box& other : others) {
+    const Eigen::Vector2d d(other.pose.x_m - ego.pose.x_m, other.pose.y_m - ego.pose.y_m);
+    const double forward = f.dot(d);
+    const double lateral = f.x() * d.y() - f.y() * d.x();
+    // Behind, roughly in line (a turning ego's rear swings across the lane it came from).
+    if (forward < 0.0 && -forward <= gap_m && std::abs(lateral) <= 0.5 * ego.width_m + 2.0) {
+      return true;
     }
   }
   return false;

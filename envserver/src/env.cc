@@ -138,6 +138,10 @@ StepResult Env::step(int action) {
                                    .sumo_collision = sumo_collision,
                                    .route_finished = progress.finished,
                                    .step = step_});
+  if (events_->sumo_only_collision()) {
+    INDRIVE_LOG(kDebug, "env") << "step " << step_
+                               << ": SUMO reports a collision of the ego without box contact";
+  }
   if (weights_ && route_ != nullptr) {
     const Waypoint& next = route_->waypoints()[progress.next_waypoint];
     const double course = ego_.pose.yaw_rad;

@@ -95,6 +95,7 @@ EventDetector::EventDetector(const RoadNetwork& net, const EventConfig& config,
 void EventDetector::reset() {
   slow_steps_ = 0;
   road_ = RoadStatus{};
+  sumo_only_collision_ = false;
 }
 
 RoadStatus EventDetector::road_status(const Pose2& pose) const {
@@ -114,15 +115,18 @@ RoadStatus EventDetector::road_status(const Pose2& pose) const {
 std::uint32_t EventDetector::update(const Inputs& in) {
   std::uint32_t bits = 0;
 
-  // Collision: own geometry first, SUMO's list as a second source.
+  // Collision: only a physical overlap of the ego's footprint with another car's box counts.
+  // SUMO's own report checks its mirrored copy of the ego against internal-lane shapes, which
+  // fires at junctions without any contact, so it is kept only as a diagnostic.
   const Box ego_box{SemanticClass::kVehicle, in.ego.pose, ego_.length_m, ego_.width_m,
                     ego_.height_m};
-  bool hit = in.sumo_collision;
+  bool hit = false;
   for (const Box& other : in.others) {
     if (hit) break;
     hit = boxes_overlap(ego_box, other);
   }
   if (hit) bits |= kCollision;
+  sumo_only_collision_ = in.sumo_collision && !hit;
 
   // Road rules.
   road_ = road_status(in.ego.pose);

@@ -50,6 +50,13 @@ std::vector<std::string> sumo_arguments(const SumoConfig& config,
       "--verbose",
       "false",
   };
+  if (config.lateral_resolution_m > 0.0) {
+    // Sublanes let a car going straight see a vehicle on a diverging (turning) link from the
+    // same lane while the two still overlap sideways; without them it drives into the rear of
+    // a slow ego that has just started its turn.
+    args.push_back("--lateral-resolution");
+    args.push_back(std::to_string(config.lateral_resolution_m));
+  }
   args.insert(args.end(), config.extra_args.begin(), config.extra_args.end());
   return args;
 }

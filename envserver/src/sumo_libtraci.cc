@@ -32,7 +32,11 @@ void LibtraciConnection::start(const std::vector<std::string>& args) {
 }
 
 void LibtraciConnection::select() {
-  if (libtraci::Simulation::getLabel() != label_) libtraci::Simulation::switchConnection(label_);
+  // After another connection closed there is no active one, and asking for its label would
+  // dereference nothing (the crash when a test closed two simulations in a row).
+  if (!libtraci::Simulation::isLoaded() || libtraci::Simulation::getLabel() != label_) {
+    libtraci::Simulation::switchConnection(label_);
+  }
 }
 
 void LibtraciConnection::release() {}

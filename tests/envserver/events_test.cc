@@ -100,16 +100,30 @@ TEST_F(EventDetectorTest, OffRoadOutsideEveryLaneAndJunction) {
   EXPECT_EQ(check({150.0, 0.0, kPi / 4}), 0u);
 }
 
-TEST_F(EventDetectorTest, CollisionFromBoxesAndFromSumo) {
+TEST_F(EventDetectorTest, CollisionOnlyFromBoxOverlap) {
   const std::vector<Box> ahead = {
       {SemanticClass::kVehicle, {60.0 + 4.7, -1.75, 0.0}, 4.8, 2.1, 1.5}};
   EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, ahead), kCollision);
   const std::vector<Box> gap = {{SemanticClass::kVehicle, {60.0 + 4.9, -1.75, 0.0}, 4.8, 2.1, 1.5}};
   EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, gap), 0u);
+  // SUMO's report without contact (its junction check on the mirrored ego) is no event, only
+  // a diagnostic; with contact the event fires and the diagnostic stays off.
   EXPECT_EQ(detector_->update({.ego = {.pose = {60.0, -1.75, 0.0}, .speed_mps = 5.0},
+                               .others = gap,
                                .sumo_collision = true,
                                .step = 1}),
+            0u);
+  EXPECT_TRUE(detector_->sumo_only_collision());
+  EXPECT_EQ(detector_->update({.ego = {.pose = {60.0, -1.75, 0.0}, .speed_mps = 5.0},
+                               .others = ahead,
+                               .sumo_collision = true,
+                               .step = 2}),
             kCollision);
+  EXPECT_FALSE(detector_->sumo_only_collision());
+  // A side impact: a crossing car's corner inside the ego's flank.
+  const std::vector<Box> side = {
+      {SemanticClass::kVehicle, {60.0 + 1.0, -1.75 + 2.5, kPi / 2}, 4.8, 2.1, 1.5}};
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, side), kCollision);
 }
 
 TEST_F(EventDetectorTest, StallAfterSixtySecondsBelowOneKilometrePerHour) {

@@ -36,9 +36,13 @@ std::vector<Case> all_cases() {
 }
 
 // One Env per town (libtraci: several simulations in one process).
-Env& env_for(const std::string& town) {
+std::map<std::string, std::unique_ptr<Env>>& all_envs() {
   static std::map<std::string, std::unique_ptr<Env>> envs;
-  auto& env = envs[town];
+  return envs;
+}
+
+Env& env_for(const std::string& town) {
+  auto& env = all_envs()[town];
   if (!env) {
     EnvConfig config;
     config.town = town;
@@ -52,7 +56,12 @@ Env& env_for(const std::string& town) {
   return *env;
 }
 
-class Feasibility : public ::testing::TestWithParam<Case> {};
+class Feasibility : public ::testing::TestWithParam<Case> {
+ protected:
+  // Closes the simulations one after another inside the test run, where a failure shows up as
+  // a test error, rather than in static destruction after main.
+  static void TearDownTestSuite() { all_envs().clear(); }
+};
 
 TEST_P(Feasibility, FollowerCompletesTheRouteWithoutFailure) {
   const Case& c = GetParam();

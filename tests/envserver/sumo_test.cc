@@ -34,6 +34,12 @@ TEST(SumoArguments, CarryTheRlSettings) {
   EXPECT_EQ(value_of("--collision.action"), "warn");
   EXPECT_EQ(value_of("--collision.check-junctions"), "true");
   EXPECT_EQ(value_of("--xml-validation"), "never");
+  // Sublanes on by default (traffic keeps a turning ego as its leader), off at 0.
+  EXPECT_DOUBLE_EQ(std::stod(value_of("--lateral-resolution")), 0.8);
+  SumoConfig no_sublanes;
+  no_sublanes.lateral_resolution_m = 0.0;
+  const auto plain = sumo_arguments(no_sublanes, "x.net.xml", 42);
+  EXPECT_EQ(std::find(plain.begin(), plain.end(), "--lateral-resolution"), plain.end());
 }
 
 TEST(SumoMode, ParsesKnownNamesAndRejectsOthers) {

@@ -105,6 +105,12 @@ struct OracleOptions {
   double horizon_s = 4.0;
   double clearance_m = 0.6;
   double min_plan_speed_mps = 3.0;  // the ego's path assumes at least this speed (it speeds up)
+  // Inside a junction with a car close behind (`follower_gap_m`, centre to centre), ignore
+  // crossing traffic (the leader test still applies) and clear the junction: SUMO stops
+  // linking that car to the ego once the ego is on its turning link, so it would run into it.
+  bool clear_junction = true;
+  double follower_gap_m = 15.0;
+  double max_yaw_rate_rps = 1.0;  // measured turn rates are clamped to this (noise guard)
 };
 // The route follower (envserver WaypointFollower) driving the episode's route with the 9
 // discrete actions, optionally coasting behind a leading vehicle.
@@ -118,9 +124,16 @@ bool leader_ahead(const env::Route& route, double ego_s_m, std::span<const env::
 // max(speed, min_plan_speed_mps) meets one of `others` moving straight at its velocity
 // (velocities[i] in m/s, world frame, one per box) within options.horizon_s, both boxes grown
 // by options.clearance_m. Vehicles behind the ego are left out: they must mind the ego.
+// yaw_rates (rad/s, one per box, or empty for straight lines) bend each car's path: a car
+// turning into the ego's road is predicted along its turn, up to a right angle.
 bool conflict_ahead(const env::Route& route, const env::Box& ego, double ego_s_m,
                     double ego_speed_mps, std::span<const env::Box> others,
-                    std::span<const Eigen::Vector2d> velocities, const OracleOptions& options);
+                    std::span<const Eigen::Vector2d> velocities, const OracleOptions& options,
+                    std::span<const double> yaw_rates = {});
+
+// True when one of `others` is behind `ego` within gap_m along its heading and about in line
+// with it (a car following the ego).
+bool follower_behind(const env::Box& ego, std::span<const env::Box> others, double gap_m);
 
 // Uniform actions; the episode's policy seed (with `seed`) makes each episode reproducible.
 std::unique_ptr<EpisodePolicy> make_random_policy(std::uint64_t seed);

@@ -4,8 +4,9 @@
 // reason). kTimeLimit is a truncation: the episode stops but the state is not terminal for the
 // world model's continuation target; every other event is terminal.
 //
-//   collision        the ego's box overlaps another vehicle's box (oriented boxes), or SUMO
-//                    reports a collision involving the ego
+//   collision        the ego's box overlaps another vehicle's box (oriented boxes); a collision
+//                    SUMO reports without such an overlap is only a diagnostic
+//                    (EventDetector::sumo_only_collision())
 //   lane_invasion    outside junctions, more than lane_invasion_overlap_m of the ego's width
 //                    lies beyond its lane's marking: |lateral| + w/2 - lane_w/2 > overlap
 //   wrong_direction  outside junctions, heading differs from the lane's by more than 90 deg
@@ -92,7 +93,7 @@ class EventDetector {
   struct Inputs {
     EgoState ego;
     std::span<const Box> others;  // other vehicles' boxes
-    bool sumo_collision = false;  // SUMO listed a collision involving the ego this step
+    bool sumo_collision = false;  // SUMO listed a collision involving the ego (diagnostic only)
     bool route_finished = false;  // the route tracker reports the end / a completed lap
     int step = 0;                 // steps taken in this episode, this one included
   };
@@ -100,6 +101,8 @@ class EventDetector {
   std::uint32_t update(const Inputs& inputs);
   // The road status computed in the last update().
   const RoadStatus& road() const { return road_; }
+  // True when the last update() had a SUMO collision report but no box overlap (no event).
+  bool sumo_only_collision() const { return sumo_only_collision_; }
   // Road status of an ego pose (no state).
   RoadStatus road_status(const Pose2& pose) const;
 
@@ -111,6 +114,7 @@ class EventDetector {
   EgoParams ego_;
   int slow_steps_ = 0;
   RoadStatus road_;
+  bool sumo_only_collision_ = false;
 };
 
 }  // namespace indrive::env

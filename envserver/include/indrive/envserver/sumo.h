@@ -54,6 +54,9 @@ struct SumoConfig {
   double traffic_max_speed_mps = 8.33;  // 30 km/h, urban traffic as in the CARLA towns
   double vehicle_length_m = 4.8;        // ego and traffic, a CARLA-like car
   double vehicle_width_m = 2.1;
+  // Sublane width (m) of SUMO's lateral model; 0 turns it off. With it, traffic behind a
+  // turning ego keeps treating it as its leader while the ego still overlaps its path.
+  double lateral_resolution_m = 0.8;
   std::vector<std::string> extra_args;  // appended to the command line as given
 };
 
