@@ -54,6 +54,12 @@ TEST(SumoMode, ParsesKnownNamesAndRejectsOthers) {
   }
 }
 
+// ctest runs every test case in its own process, so no other libsumo connection is open here.
+TEST(Libsumo, ClaimIsGivenBackWhenNoSimulationWasStarted) {
+  { auto unused = make_sumo_connection(SumoConfig{}); }
+  EXPECT_NO_THROW({ auto again = make_sumo_connection(SumoConfig{}); });
+}
+
 TEST(Libsumo, LoadsNetworkAndReportsItsLanes) {
   TempDir dir;
   auto& sumo = shared_libsumo();
