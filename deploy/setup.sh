@@ -25,7 +25,7 @@ packages=(
   sumo
   libeigen3-dev libopencv-dev
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libpugixml-dev zlib1g-dev libzstd-dev
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libgtest-dev libgmock-dev
   ffmpeg
 )
 
