@@ -550,6 +550,16 @@ struct Learner::Impl {
     }
     // Chunks already received are stored, so the final checkpoint keeps them.
     drain();
+    // At the budget's end the last parameters go out as a snapshot even when snapshot_every
+    // does not divide the updates: evaluators waiting for the run's final policy evaluate what
+    // was trained, not an older (or, on a short budget, no) snapshot.
+    if (done && stats.counters.updates > 0 &&
+        (!newest_snapshot ||
+         newest_snapshot->updates() < static_cast<std::uint64_t>(stats.counters.updates))) {
+      publish_snapshot();
+      INDRIVE_LOG(kInfo, "learner") << "final snapshot v" << stats.counters.policy_version << " at "
+                                    << stats.counters.updates << " updates";
+    }
     if (stats.counters.env_steps > 0 || stats.counters.updates > 0) save_checkpoint();
     release_reserved_versions();
     last_log = Clock::now() - std::chrono::hours(1);

@@ -84,8 +84,9 @@ TEST_F(ReplayRatioTest, HoldsWithinFivePercentOverARunWithTwoActors) {
   // Two actors may each run ahead of training by one update's steps, the slack and an open
   // chunk (see keeps_ratio).
   constexpr double kLead = 2 * (32 + 16 + 16);
-  Run run = start("limited",
-                  {"run.budget_env_steps=" + std::to_string(kBudget), "learner.replay_ratio=4"});
+  // snapshot_every above the run's updates: the only snapshot is the final one.
+  Run run = start("limited", {"run.budget_env_steps=" + std::to_string(kBudget),
+                              "learner.replay_ratio=4", "learner.snapshot_every=100000"});
   // The learner ends the run by itself once the budget's updates are done.
   ASSERT_EQ(run.learner->wait(150s), 0) << logs("limited");
   run.actor0->signal(SIGTERM);
@@ -116,6 +117,8 @@ TEST_F(ReplayRatioTest, HoldsWithinFivePercentOverARunWithTwoActors) {
       last.value("updates", 0.0) * kStepsPerUpdate / last.value("env_steps", 1.0);
   EXPECT_NEAR(final_ratio, kRatio, kRatio * 0.05) << last.dump();
   EXPECT_GE(last.value("env_steps", 0), kBudget);
+  // The budget's end publishes the final parameters, so evaluators of the run have a policy.
+  EXPECT_EQ(last.value("snapshots_published", -1), 1) << last.dump();
   std::printf(
       "[figures] replay ratio over a %lld-step run with 2 actors: final %.3f (target %.1f, "
       "%lld env steps, %lld updates); %.3f..%.3f over %d metrics lines after half the budget; "
