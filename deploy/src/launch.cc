@@ -70,6 +70,8 @@ std::vector<ProcessSpec> launch_plan(const LaunchOptions& options) {
         .name = name,
         .restart = RestartPolicy::kOnFailure,
         .backoff = {.initial_s = 1.0, .factor = 2.0, .max_s = 30.0, .max_restarts = 5},
+        // It evaluates the learner's final snapshot after the learner has ended the run.
+        .finishes_run = true,
         .log_file = logs / (name + ".log")};
     evaluator.argv = {(options.bin_dir / "indrive-actor").string(), "--evaluate"};
     evaluator.argv.insert(evaluator.argv.end(), args.begin(), args.end());

@@ -216,7 +216,7 @@ void Supervisor::reap() {
     const double uptime_s = std::chrono::duration<double>(now - child.started_at).count();
     if (uptime_s >= child.spec.backoff.stable_s) child.consecutive_failures = 0;
     const bool may_restart = failed && child.spec.restart == RestartPolicy::kOnFailure &&
-                             !stop_requested_ &&
+                             !stop_requested_ && !(others_stopped_ && !child.spec.finishes_run) &&
                              (child.spec.backoff.max_restarts < 0 ||
                               child.status.restarts < child.spec.backoff.max_restarts);
     if (may_restart) {
@@ -259,7 +259,25 @@ bool Supervisor::poll(std::chrono::milliseconds wait) {
     alive = alive || child->status.state == ChildState::kRunning ||
             child->status.state == ChildState::kWaitingRestart;
   }
-  return alive && !stop_requested_ && !essential_ended_;
+  if (!essential_ended_) return alive && !stop_requested_;
+  // The essential child is done: the children that finish the run go on to their own end.
+  bool finishing = false;
+  for (Child* child : children_) {
+    if (!child->spec.finishes_run) continue;
+    finishing = finishing || child->status.state == ChildState::kRunning ||
+                child->status.state == ChildState::kWaitingRestart;
+  }
+  if (finishing && !others_stopped_) {
+    others_stopped_ = true;
+    for (Child* child : children_) {
+      if (child->spec.finishes_run) continue;
+      if (child->status.state == ChildState::kRunning) ::kill(-child->status.pid, SIGTERM);
+      if (child->status.state == ChildState::kWaitingRestart) {
+        child->status.state = ChildState::kExited;
+      }
+    }
+  }
+  return finishing && !stop_requested_;
 }
 
 void Supervisor::request_stop() { stop_requested_ = 1; }

@@ -23,6 +23,7 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
   ASSERT_EQ(plan.size(), 4u);
   EXPECT_EQ(plan[0].name, "learner");
   EXPECT_TRUE(plan[0].essential);
+  EXPECT_FALSE(plan[0].finishes_run);
   EXPECT_EQ(plan[0].restart, RestartPolicy::kOnFailure);  // resumes from its checkpoint
   EXPECT_GT(plan[0].backoff.max_restarts, 0);
   EXPECT_EQ(plan[0].argv[0], "/opt/indrive/bin/indrive-learner");
@@ -31,6 +32,8 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
   EXPECT_EQ(plan[2].restart, RestartPolicy::kOnFailure);
   EXPECT_EQ(plan[3].name, "evaluator-0");
   EXPECT_EQ(plan[3].argv[1], "--evaluate");
+  EXPECT_TRUE(plan[3].finishes_run);  // evaluates the final snapshot after the learner ends
+  EXPECT_FALSE(plan[1].finishes_run);
   for (const auto& spec : plan) {
     const auto& a = spec.argv;
     auto after = [&](const std::string& flag) {

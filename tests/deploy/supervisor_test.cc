@@ -121,6 +121,28 @@ TEST(Supervisor, AnEssentialChildEndingStopsSupervision) {
   supervisor.stop(2s);
 }
 
+TEST(Supervisor, ChildrenThatFinishTheRunOutliveTheEssentialOneAndTheOthersAreStopped) {
+  Supervisor supervisor;
+  supervisor.add({.name = "learner", .argv = {"sh", "-c", "exit 0"}, .essential = true});
+  supervisor.add(
+      {.name = "actor-0", .argv = {"sleep", "30"}, .restart = RestartPolicy::kOnFailure});
+  supervisor.add(
+      {.name = "evaluator-0", .argv = {"sh", "-c", "sleep 1; exit 0"}, .finishes_run = true});
+  supervisor.start();
+  const auto before = std::chrono::steady_clock::now();
+  run_until_done(supervisor, 10s);
+  // Supervision lasted until the evaluator's own end, not the learner's.
+  EXPECT_GE(std::chrono::steady_clock::now() - before, 900ms);
+  EXPECT_EQ(status_of(supervisor, "evaluator-0").state, ChildState::kExited);
+  EXPECT_EQ(status_of(supervisor, "evaluator-0").last_exit_code, 0);
+  // The actor was stopped with SIGTERM and not restarted.
+  const auto actor = status_of(supervisor, "actor-0");
+  EXPECT_NE(actor.state, ChildState::kRunning);
+  EXPECT_NE(actor.state, ChildState::kWaitingRestart);
+  EXPECT_EQ(actor.restarts, 0);
+  supervisor.stop(2s);
+}
+
 TEST(Supervisor, AMissingExecutableIsAClearError) {
   Supervisor supervisor;
   supervisor.add({.name = "ghost", .argv = {"indrive-no-such-program"}});

@@ -51,6 +51,9 @@ struct ProcessSpec {
   RestartPolicy restart = RestartPolicy::kNever;
   Backoff backoff;
   bool essential = false;  // when an essential child ends for good, the supervisor stops all
+  // ... except children that finish the run: they keep running to their own end (evaluators
+  // evaluating the run's final snapshot); the others get SIGTERM at once.
+  bool finishes_run = false;
   std::filesystem::path log_file;  // optional: every output line is appended here too
 };
 
@@ -81,8 +84,8 @@ class Supervisor {
   // Starts every registered child. Throws LaunchError if one cannot be started.
   void start();
   // Pumps output, reaps exits and performs due restarts for up to `wait`. Returns false once
-  // there is nothing left to supervise: every child ended for good, an essential child ended,
-  // or stop() was requested.
+  // there is nothing left to supervise: every child ended for good, an essential child ended
+  // and no child that finishes the run is left, or stop() was requested.
   bool poll(std::chrono::milliseconds wait);
   // Sends SIGTERM to every running child, waits up to `grace`, then SIGKILLs the rest.
   void stop(std::chrono::milliseconds grace);
@@ -104,6 +107,7 @@ class Supervisor {
   std::function<void(const std::string&, const std::string&)> on_line_;
   volatile int stop_requested_ = 0;
   bool essential_ended_ = false;
+  bool others_stopped_ = false;  // SIGTERM sent to the children that do not finish the run
 };
 
 }  // namespace indrive::deploy
