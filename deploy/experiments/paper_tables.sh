@@ -27,6 +27,7 @@ prefill=500
 episodes=1          # evaluation episodes per town x route x density
 densities="[5,10,20]"
 actors=2
+snapshot_every=10   # updates between snapshots: short runs need the actors to act with them
 evaluators=2
 seed=0
 methods="disag icm rnd"
@@ -43,6 +44,7 @@ while [[ $# -gt 0 ]]; do
     --episodes) episodes=$2; shift 2 ;;
     --densities) densities=$2; shift 2 ;;
     --actors) actors=$2; shift 2 ;;
+    --snapshot-every) snapshot_every=$2; shift 2 ;;
     --evaluators) evaluators=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
     --methods) methods=$2; shift 2 ;;
@@ -61,7 +63,8 @@ say() { printf '\033[1m[paper-tables]\033[0m %s\n' "$*"; }
 common=(--runs-dir "$out" --actors "$actors" --evaluators "$evaluators" --status-interval 30
         --set "preset=$preset" --set "run.seed=$seed" --set "agent.replay.prefill=$prefill"
         --set "eval.towns=town01,town02" --set "eval.densities=$densities"
-        --set "eval.episodes_per_cell=$episodes" --set "eval.wait_for_done=true")
+        --set "eval.episodes_per_cell=$episodes" --set "eval.wait_for_done=true"
+        --set "learner.snapshot_every=$snapshot_every")
 
 runs=()
 for method in $methods; do
