@@ -550,15 +550,16 @@ struct Learner::Impl {
     }
     // Chunks already received are stored, so the final checkpoint keeps them.
     drain();
-    // At the budget's end the last parameters go out as a snapshot even when snapshot_every
-    // does not divide the updates: evaluators waiting for the run's final policy evaluate what
-    // was trained, not an older (or, on a short budget, no) snapshot.
-    if (done && stats.counters.updates > 0 &&
-        (!newest_snapshot ||
-         newest_snapshot->updates() < static_cast<std::uint64_t>(stats.counters.updates))) {
+    // At the budget's end a run that never published a snapshot (snapshot_every above its
+    // updates) publishes its parameters, so evaluators of a short run have a policy. Only then:
+    // a snapshot written just before the learner exits can be lost to readers still fetching
+    // it, and the newest periodic snapshot is the run's final policy otherwise. The learner
+    // lingers briefly so readers can fetch it.
+    if (done && stats.counters.updates > 0 && !newest_snapshot) {
       publish_snapshot();
       INDRIVE_LOG(kInfo, "learner") << "final snapshot v" << stats.counters.policy_version << " at "
                                     << stats.counters.updates << " updates";
+      std::this_thread::sleep_for(std::chrono::seconds(2));
     }
     if (stats.counters.env_steps > 0 || stats.counters.updates > 0) save_checkpoint();
     release_reserved_versions();
