@@ -309,6 +309,24 @@ int route_step_budget(double length_m, double speed_mps, double slack, double dt
   return std::max(1, static_cast<int>(std::ceil(slack * length_m / (speed_mps * dt_s) - 1e-9)));
 }
 
+EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int steps,
+                              double route_completion, double episode_return) {
+  const std::uint32_t failures = events & env::kFailureEvents;
+  EpisodeRecord record;
+  record.town = spec.town;
+  record.route = spec.route;
+  record.density = spec.density;
+  record.traffic_seed = spec.traffic_seed;
+  record.spawn_seed = spec.spawn_seed;
+  record.episode = spec.episode;
+  record.success = (events & env::kDestination) != 0 && failures == 0;
+  record.failure_reason = record.success ? "" : env::event_names(failures);
+  record.steps = steps;
+  record.route_completion = route_completion;
+  record.episode_return = episode_return;
+  return record;
+}
+
 std::unique_ptr<EpisodePolicy> make_snapshot_policy(agent::AgentConfig agent_config,
                                                     std::span<const std::uint8_t> blob,
                                                     PolicyHead head, const std::string& source) {

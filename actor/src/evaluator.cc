@@ -339,25 +339,14 @@ struct Evaluator::Impl {
       bool stopped = false;
       const EpisodeOutcome outcome = run_episode(spec, stop, &stopped);
       if (stopped) break;
-      const std::uint32_t failures = outcome.events & env::kFailureEvents;
-      EpisodeRecord record;
+      EpisodeRecord record = protocol_record(spec, outcome.events, outcome.steps,
+                                             outcome.route_completion, outcome.episode_return);
       record.run_id = config.run_id();
       record.method = method;
       record.eval_kind = config.config().get<std::string>("eval.kind");
       record.task = task;
       record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
       record.policy_version = static_cast<long long>(version);
-      record.town = spec.town;
-      record.route = spec.route;
-      record.density = spec.density;
-      record.traffic_seed = spec.traffic_seed;
-      record.spawn_seed = spec.spawn_seed;
-      record.episode = spec.episode;
-      record.success = (outcome.events & env::kDestination) != 0 && failures == 0;
-      record.failure_reason = record.success ? "" : env::event_names(failures);
-      record.steps = outcome.steps;
-      record.route_completion = outcome.route_completion;
-      record.episode_return = outcome.episode_return;
       if (csv != nullptr) csv->write(record);
       if (curve != nullptr) curve->write(env_steps, record);
       publish(record, version);

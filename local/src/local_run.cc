@@ -8,9 +8,11 @@
 #include <sstream>
 
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/eval_policy.h"
 #include "indrive/actor/protocol.h"
 #include "indrive/common/agent/local_trainer.h"
 #include "indrive/common/agent/policy.h"
+#include "indrive/common/check.h"
 #include "indrive/common/episode_csv.h"
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
@@ -362,9 +364,15 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
                                       .density = spec.density,
                                       .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
                                       .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
+    const env::Route* driven = env.route();
+    INDRIVE_CHECK(driven != nullptr) << "an evaluation reset must place the ego on its route";
+    // The protocol's step budget, as the evaluator applies it.
+    const int budget = actor::route_step_budget(
+        driven->length_m(), config.config().get<double>("eval.budget_speed_mps"),
+        config.config().get<double>("eval.budget_slack"));
     agent::PolicyState state;
     double episode_return = 0.0;
-    while (!step.is_last && !stop.load()) {
+    while (!step.is_last && step.step < budget && !stop.load()) {
       const int action = random
                              ? random_policy.act()
                              : policy.act_eval(std::span<const std::uint8_t>(
@@ -373,29 +381,18 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
       step = env.step(action);
       episode_return += step.reward.value_or(0.0);
     }
-    if (!step.is_last) break;
-    const std::uint32_t failures = step.events & env::kFailureEvents;
-    const env::Route* driven = env.route();
-    EpisodeRecord record;
+    if (!step.is_last && step.step < budget) break;  // stopped
+    const std::uint32_t events = step.is_last ? step.events : step.events | env::kTimeLimit;
+    const double completion =
+        driven->length_m() <= 0.0 ? 0.0 : std::min(1.0, step.route_progress_m / driven->length_m());
+    EpisodeRecord record =
+        actor::protocol_record(spec, events, step.step, completion, episode_return);
     record.run_id = config.run_id();
     record.method = method_name(config, agent_config);
     record.eval_kind = agent_config.phase == agent::Phase::kPretrain ? "zero_shot" : "few_shot";
     record.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
     record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
     record.policy_version = version;
-    record.town = spec.town;
-    record.route = spec.route;
-    record.density = spec.density;
-    record.traffic_seed = spec.traffic_seed;
-    record.spawn_seed = spec.spawn_seed;
-    record.episode = spec.episode;
-    record.success = (step.events & env::kDestination) != 0 && failures == 0;
-    record.failure_reason = record.success ? "" : env::event_names(failures);
-    record.steps = step.step;
-    record.route_completion = driven == nullptr || driven->length_m() <= 0.0
-                                  ? 0.0
-                                  : std::min(1.0, step.route_progress_m / driven->length_m());
-    record.episode_return = episode_return;
     csv.write(record);
     ++summary.episodes;
     summary.successes += record.success ? 1 : 0;

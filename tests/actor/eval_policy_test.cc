@@ -142,6 +142,35 @@ TEST(EvalPolicy, StepBudgetIsFiveStepsPerMetreByDefault) {
   EXPECT_GT(route_step_budget(649.0), 649.0 / (5.0 * 0.1) * 2.0);
 }
 
+TEST(EvalPolicy, ProtocolRecordSucceedsOnlyAtTheDestinationWithoutFailures) {
+  const EpisodeSpec spec{.town = "town02",
+                         .route = "two_turn",
+                         .density = 10,
+                         .episode = 4,
+                         .traffic_seed = 202,
+                         .spawn_seed = 33};
+  const EpisodeRecord reached = protocol_record(spec, env::kDestination, 812, 1.0, 3.5);
+  EXPECT_TRUE(reached.success);
+  EXPECT_EQ(reached.failure_reason, "");
+  EXPECT_EQ(reached.town, "town02");
+  EXPECT_EQ(reached.route, "two_turn");
+  EXPECT_EQ(reached.density, 10);
+  EXPECT_EQ(reached.traffic_seed, 202);
+  EXPECT_EQ(reached.spawn_seed, 33);
+  EXPECT_EQ(reached.episode, 4);
+  EXPECT_EQ(reached.steps, 812);
+  EXPECT_DOUBLE_EQ(reached.route_completion, 1.0);
+  EXPECT_DOUBLE_EQ(reached.episode_return, 3.5);
+  // Reaching the destination while colliding is a failure named by the failure event.
+  const EpisodeRecord crashed =
+      protocol_record(spec, env::kDestination | env::kCollision, 812, 1.0, 0.0);
+  EXPECT_FALSE(crashed.success);
+  EXPECT_EQ(crashed.failure_reason, env::event_names(env::kCollision));
+  const EpisodeRecord timed_out = protocol_record(spec, env::kTimeLimit, 3245, 0.4, 0.0);
+  EXPECT_FALSE(timed_out.success);
+  EXPECT_EQ(timed_out.failure_reason, env::event_names(env::kTimeLimit));
+}
+
 TEST(EvalPolicy, LeaderAheadSeesOnlyVehiclesOnTheRouteInFront) {
   const env::Town town = env::load_town("town01");
   const env::Route& route = env::find_route(town.routes, "right_loop");

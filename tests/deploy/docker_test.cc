@@ -16,10 +16,13 @@
 #include <set>
 #include <sstream>
 
+#include "child_process.h"
 #include "testing.h"
 
 namespace indrive {
 namespace {
+
+using testing::slurp;
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
@@ -48,11 +51,6 @@ std::string quote(const std::string& text) {
   std::string quoted = "'";
   for (char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return quoted + "'";
-}
-
-std::string slurp(const fs::path& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
 // yaml-cpp does not apply `<<` merge keys; the compose file uses one for shared settings.

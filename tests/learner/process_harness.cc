@@ -1,8 +1,6 @@
 #include "process_harness.h"
 
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -13,53 +11,8 @@
 #include <stdexcept>
 #include <thread>
 
-extern char** environ;
-
 namespace indrive::testing {
 namespace fs = std::filesystem;
-
-Child::Child(std::vector<std::string> argv, const fs::path& log) {
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-  posix_spawn_file_actions_adddup2(&actions, 1, 2);
-  std::vector<char*> args;
-  for (auto& arg : argv) args.push_back(arg.data());
-  args.push_back(nullptr);
-  const int error = posix_spawn(&pid_, args[0], &actions, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (error != 0) throw std::runtime_error("cannot start " + argv[0]);
-}
-
-Child::~Child() {
-  if (pid_ > 0) {
-    ::kill(pid_, SIGKILL);
-    ::waitpid(pid_, nullptr, 0);
-  }
-}
-
-void Child::signal(int number) {
-  if (pid_ > 0) ::kill(pid_, number);
-}
-
-int Child::wait(std::chrono::milliseconds timeout) {
-  const auto end = SteadyClock::now() + timeout;
-  while (pid_ > 0) {
-    int status = 0;
-    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-      pid_ = -1;
-      return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-    }
-    if (SteadyClock::now() >= end) return -1;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return -1;
-}
-
-bool Child::running() {
-  int status = 0;
-  return pid_ > 0 && ::waitpid(pid_, &status, WNOHANG) == 0;
-}
 
 bool wait_until(std::chrono::milliseconds timeout, const std::function<bool()>& condition) {
   const auto end = SteadyClock::now() + timeout;
@@ -72,11 +25,6 @@ bool wait_until(std::chrono::milliseconds timeout, const std::function<bool()>& 
 
 double seconds_since(SteadyClock::time_point start) {
   return std::chrono::duration<double>(SteadyClock::now() - start).count();
-}
-
-std::string slurp(const fs::path& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
 std::vector<nlohmann::json> read_metrics(const fs::path& path) {

@@ -21,42 +21,18 @@
 #include <string>
 #include <vector>
 
+#include "child_process.h"
 #include "indrive/common/dds.h"
 
 namespace indrive::testing {
 
 using SteadyClock = std::chrono::steady_clock;
 
-// A child process with stdout and stderr appended to a log file; SIGKILLed and reaped when
-// the object dies.
-class Child {
- public:
-  // Starts argv[0] (a path) with the given arguments; throws std::runtime_error if it cannot.
-  Child(std::vector<std::string> argv, const std::filesystem::path& log);
-  ~Child();
-  Child(const Child&) = delete;
-  Child& operator=(const Child&) = delete;
-
-  // Sends a signal to the process.
-  void signal(int number);
-  // Waits for the exit and returns its exit code, 128 + signal for a signal, -1 on timeout.
-  int wait(std::chrono::milliseconds timeout);
-  // True while the process has not exited.
-  bool running();
-  pid_t pid() const { return pid_; }
-
- private:
-  pid_t pid_ = -1;
-};
-
 // Polls `condition` every 50 ms until it holds or `timeout` passes; returns its last value.
 bool wait_until(std::chrono::milliseconds timeout, const std::function<bool()>& condition);
 
 // Seconds since `start`.
 double seconds_since(SteadyClock::time_point start);
-
-// The whole text of a file ("" when it is missing).
-std::string slurp(const std::filesystem::path& path);
 
 // Every line of a metrics.jsonl file, parsed, in order (lines that do not parse are skipped:
 // a killed learner may leave a partial last line).

@@ -17,9 +17,7 @@
 // scenario starts fresh processes, waits for training (and, rate-limited, for the learner to
 // catch up with the prefill), then measures. Children get OMP_WAIT_POLICY=passive unless the
 // environment sets it, as `indrive launch` does.
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -43,12 +41,11 @@
 #include <sstream>
 #include <thread>
 
+#include "child_process.h"
 #include "indrive/common/agent/config.h"
 #include "indrive/common/dds.h"
 #include "indrive/msg/policyPubSubTypes.h"
 #include "testing.h"
-
-extern char** environ;
 
 namespace indrive {
 namespace {
@@ -58,59 +55,8 @@ namespace fdds = eprosima::fastdds::dds;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
-// A child process with its output in a log file; killed when the object dies.
-class Child {
- public:
-  Child(std::vector<std::string> argv, const fs::path& log) {
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
-    std::vector<char*> args;
-    for (auto& arg : argv) args.push_back(arg.data());
-    args.push_back(nullptr);
-    const int error = posix_spawn(&pid_, args[0], &actions, nullptr, args.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    if (error != 0) throw std::runtime_error("cannot start " + argv[0]);
-  }
-  ~Child() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  Child(const Child&) = delete;
-  Child& operator=(const Child&) = delete;
-
-  bool running() {
-    int status = 0;
-    return pid_ > 0 && ::waitpid(pid_, &status, WNOHANG) == 0;
-  }
-  // Sends SIGTERM and waits; SIGKILL after the timeout.
-  void stop(std::chrono::seconds timeout) {
-    if (pid_ <= 0) return;
-    ::kill(pid_, SIGTERM);
-    const auto end = Clock::now() + timeout;
-    while (Clock::now() < end) {
-      if (::waitpid(pid_, nullptr, WNOHANG) == pid_) {
-        pid_ = -1;
-        return;
-      }
-      std::this_thread::sleep_for(50ms);
-    }
-    ::kill(pid_, SIGKILL);
-    ::waitpid(pid_, nullptr, 0);
-    pid_ = -1;
-  }
-
- private:
-  pid_t pid_ = -1;
-};
-
-std::string slurp(const fs::path& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
+using testing::Child;
+using testing::slurp;
 
 std::string tail(const std::string& text, std::size_t chars = 1500) {
   return text.size() <= chars ? text : "..." + text.substr(text.size() - chars);

@@ -23,6 +23,7 @@
 
 #include "indrive/actor/protocol.h"
 #include "indrive/common/agent/config.h"
+#include "indrive/common/episode_csv.h"
 #include "indrive/envserver/env.h"
 
 namespace indrive::actor {
@@ -72,6 +73,13 @@ void write_snapshot_file(const std::filesystem::path& path, std::span<const std:
 // 3-6 m/s, less than one lap.
 int route_step_budget(double length_m, double speed_mps = 3.0, double slack = 1.5,
                       double dt_s = 0.1);
+
+// The protocol's verdict on one episode of `spec`, as a CSV row without the run-level fields
+// (run id, method, eval kind, task, seeds of training, policy version): success means the
+// destination event with no failure event; otherwise the failure events name the reason.
+// `events`: EventBit bits of the last step (kTimeLimit included when the budget ran out).
+EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int steps,
+                              double route_completion, double episode_return);
 
 // One episode's driver.
 class EpisodePolicy {
