@@ -79,10 +79,26 @@ class FaultTest : public ::testing::Test {
   fs::path profile_ = testing::source_path("deploy/dds/single_host.xml");
 };
 
+struct ActorRestart {
+  std::uint32_t actor_id = 0;
+  double after_s = 0.0;
+};
+
+// Whether `later` comes from a newer process of the actor than `earlier` (the one restart).
+bool from_new_process(const SeenChunk& earlier, const SeenChunk& later,
+                      const std::optional<ActorRestart>& restart) {
+  return restart && later.actor_id == restart->actor_id && earlier.time_s <= restart->after_s &&
+         later.time_s > restart->after_s;
+}
+
 // Sum of steps and number of chunks of `chunks` (in arrival order); checks that every chunk is
 // complete: L steps, or fewer when it ends an episode or when the actor switched to a newer
-// snapshot after it (every chunk is made by one policy version).
-std::pair<std::int64_t, std::int64_t> complete_chunks(const std::vector<SeenChunk>& chunks) {
+// snapshot after it (every chunk is made by one policy version). The switch shows in the
+// actor's next chunk; a short chunk whose successor was never sent (its process was killed or
+// stopped right after the switch) or never seen by the test (a hole in the sequence numbers)
+// cannot be checked this way and is left to the learner's step count below.
+std::pair<std::int64_t, std::int64_t> complete_chunks(
+    const std::vector<SeenChunk>& chunks, std::optional<ActorRestart> restart = std::nullopt) {
   std::int64_t steps = 0;
   for (std::size_t i = 0; i < chunks.size(); ++i) {
     const SeenChunk& chunk = chunks[i];
@@ -91,8 +107,11 @@ std::pair<std::int64_t, std::int64_t> complete_chunks(const std::vector<SeenChun
     const auto next =
         std::find_if(chunks.begin() + static_cast<std::ptrdiff_t>(i) + 1, chunks.end(),
                      [&](const SeenChunk& later) { return later.actor_id == chunk.actor_id; });
-    EXPECT_TRUE(next != chunks.end() && next->chunk_seq == chunk.chunk_seq + 1 &&
-                next->policy_version > chunk.policy_version)
+    if (next == chunks.end() || from_new_process(chunk, *next, restart) ||
+        next->chunk_seq != chunk.chunk_seq + 1) {
+      continue;
+    }
+    EXPECT_GT(next->policy_version, chunk.policy_version)
         << "actor " << chunk.actor_id << " sent chunk " << chunk.chunk_seq << " with "
         << chunk.num_steps << " steps that neither ends an episode nor precedes a new snapshot";
   }
@@ -105,10 +124,6 @@ std::pair<std::int64_t, std::int64_t> complete_chunks(const std::vector<SeenChun
 // new process of one actor begins (its first chunk seen after that time), because on a loaded
 // host the watch can miss so many of the new process's first chunks that its numbers look like
 // a continuation of the old one's.
-struct ActorRestart {
-  std::uint32_t actor_id = 0;
-  double after_s = 0.0;
-};
 std::int64_t missed_chunks(const std::vector<SeenChunk>& chunks,
                            std::optional<ActorRestart> restart = std::nullopt) {
   std::map<std::uint32_t, std::int64_t> next;  // per actor: the next sequence number expected
@@ -230,11 +245,12 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
   ASSERT_FALSE(lines.empty());
   const auto& last = lines.back();
   const auto seen = watch.chunks();
-  const auto [steps, chunks] = complete_chunks(seen);
+  const ActorRestart restart{0, killed_at + 0.5};
+  const auto [steps, chunks] = complete_chunks(seen, restart);
   // On a loaded host the test's reader can match an actor's writer after its first chunks went
   // out (a volatile topic does not replay them); those are counted from the sequence numbers,
   // at most L steps each. With none missed the comparison is exact.
-  const std::int64_t missed = missed_chunks(seen, ActorRestart{0, killed_at + 0.5});
+  const std::int64_t missed = missed_chunks(seen, restart);
   EXPECT_EQ(last.value("chunks", -1), chunks + missed) << last.dump();
   EXPECT_GE(last.value("env_steps", -1), steps) << last.dump();
   EXPECT_LE(last.value("env_steps", -1), steps + missed * kChunkLength) << last.dump();
