@@ -526,11 +526,15 @@ struct Learner::Impl {
     logged_steps = stats.counters.env_steps;
     logged_updates = stats.counters.updates;
     while (!stop.load()) {
-      bool worked = drain();
+      bool worked = false;
       if (ready_to_train()) {
         train_one();
         worked = true;
       }
+      // Chunks that arrived during the update are counted before the pacing goes out: a
+      // heartbeat with an older count would make each actor forget the steps it sent meanwhile
+      // and take them again, running ahead of the replay ratio on a slow or loaded machine.
+      worked = drain() || worked;
       publish_pacing(false);
       if (republish_requested.exchange(false) && newest_snapshot) {
         ++stats.snapshot_requests;
