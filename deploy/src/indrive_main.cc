@@ -78,7 +78,8 @@ int main(int argc, char** argv) {
   std::string plot_x = "env_steps";
   auto* plot_cmd = app.add_subcommand(
       "plot",
-      "draw learning curves (metrics.jsonl) and the coverage map of a run into <run>/plots/");
+      "draw learning curves (metrics.jsonl, eval/curve-*.csv) and the coverage map of a run "
+      "into <run>/plots/");
   plot_cmd->add_option("run", plot_run, "run directory")->required()->check(CLI::ExistingDirectory);
   plot_cmd->add_option("--x", plot_x, "metric on the x axis")->capture_default_str();
 
@@ -103,10 +104,13 @@ int main(int argc, char** argv) {
       const auto map =
           indrive::deploy::plot_coverage(plot_run, plot_run / "plots" / "coverage_map.png");
       if (map) std::printf("%s\n", map->c_str());
-      if (!has_metrics && !map) {
-        throw std::runtime_error(plot_run.string() +
-                                 " has neither metrics.jsonl nor coverage files: is it a run "
-                                 "directory?");
+      const auto curves = indrive::deploy::plot_eval_curves(plot_run, plot_run / "plots");
+      for (const auto& file : curves) std::printf("%s\n", file.c_str());
+      if (!has_metrics && !map && curves.empty()) {
+        throw std::runtime_error(
+            plot_run.string() +
+            " has no metrics.jsonl, coverage files or eval learning curves: is it a run "
+            "directory?");
       }
       return 0;
     }

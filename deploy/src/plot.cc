@@ -219,6 +219,109 @@ std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& met
   return written;
 }
 
+EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files) {
+  struct Sum {
+    int episodes = 0;
+    int successes = 0;
+    double completion = 0.0;
+  };
+  std::map<std::string, std::map<double, Sum>> sums;
+  for (const auto& path : files) {
+    std::ifstream in(path);
+    if (!in) throw IoError("cannot open " + path.string());
+    std::string header;
+    std::getline(in, header);
+    std::map<std::string, std::size_t> column;
+    {
+      std::istringstream fields(header);
+      std::size_t index = 0;
+      for (std::string name; std::getline(fields, name, ',');) column[name] = index++;
+    }
+    for (const char* name : {"env_steps", "town", "success", "route_completion"}) {
+      if (!column.contains(name)) {
+        throw IoError(path.string() + " has no '" + name +
+                      "' column: is it a learning curve written by indrive-actor --continuous?");
+      }
+    }
+    const std::size_t width = column.size();
+    int number = 1;
+    for (std::string line; std::getline(in, line);) {
+      ++number;
+      if (line.empty()) continue;
+      std::vector<std::string> fields;
+      std::istringstream split(line);
+      for (std::string field; std::getline(split, field, ',');) fields.push_back(field);
+      if (!line.empty() && line.back() == ',') fields.emplace_back();
+      const auto bad = [&](const std::string& what) {
+        return IoError(path.string() + ":" + std::to_string(number) + ": " + what);
+      };
+      try {
+        if (fields.size() != width) throw bad("expected " + std::to_string(width) + " fields");
+        const double steps = std::stod(fields[column["env_steps"]]);
+        const int success = std::stoi(fields[column["success"]]);
+        const double completion = std::stod(fields[column["route_completion"]]);
+        if (success != 0 && success != 1) throw bad("success must be 0 or 1");
+        Sum& sum = sums[fields[column["town"]]][steps];
+        ++sum.episodes;
+        sum.successes += success;
+        sum.completion += completion;
+      } catch (const std::logic_error&) {  // std::stod / std::stoi on a non-number
+        if (in.peek() == EOF) break;       // the cut last line of a crashed evaluator
+        throw bad("not a number where one is expected");
+      } catch (const IoError&) {
+        if (in.peek() == EOF) break;
+        throw;
+      }
+    }
+  }
+  EvalCurves curves;
+  for (const auto& [town, by_steps] : sums) {
+    for (const auto& [steps, sum] : by_steps) {
+      curves[town].push_back({.env_steps = steps,
+                              .episodes = sum.episodes,
+                              .success_rate = double(sum.successes) / sum.episodes,
+                              .route_completion = sum.completion / sum.episodes});
+    }
+  }
+  return curves;
+}
+
+std::vector<std::filesystem::path> plot_eval_curves(const std::filesystem::path& run_dir,
+                                                    const std::filesystem::path& out_dir) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> files;
+  if (fs::is_directory(run_dir / "eval")) {
+    for (const auto& entry : fs::directory_iterator(run_dir / "eval")) {
+      const std::string name = entry.path().filename().string();
+      if (name.starts_with("curve-") && entry.path().extension() == ".csv") {
+        files.push_back(entry.path());
+      }
+    }
+  }
+  std::sort(files.begin(), files.end());
+  const EvalCurves curves = read_eval_curves(files);
+  if (curves.empty()) return {};
+  LinePlot success("evaluation success rate (continuous evaluator)", "env steps", "SR %");
+  LinePlot completion("evaluation route completion (continuous evaluator)", "env steps",
+                      "mean route completion %");
+  for (const auto& [town, points] : curves) {
+    std::vector<double> x, sr, rc;
+    for (const auto& point : points) {
+      x.push_back(point.env_steps);
+      sr.push_back(100.0 * point.success_rate);
+      rc.push_back(100.0 * point.route_completion);
+    }
+    success.add_series(town, x, std::move(sr));
+    completion.add_series(town, std::move(x), std::move(rc));
+  }
+  fs::create_directories(out_dir);
+  const std::vector<fs::path> written = {out_dir / "eval_success_rate.png",
+                                         out_dir / "eval_route_completion.png"};
+  success.save(written[0]);
+  completion.save(written[1]);
+  return written;
+}
+
 std::optional<std::filesystem::path> plot_coverage(const std::filesystem::path& run_dir,
                                                    const std::filesystem::path& png_path) {
   namespace fs = std::filesystem;

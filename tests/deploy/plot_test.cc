@@ -5,7 +5,9 @@
 #include <cmath>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
+#include <sstream>
 
+#include "indrive/common/run_dir.h"
 #include "indrive/envserver/coverage.h"
 #include "indrive/envserver/town.h"
 #include "testing.h"
@@ -53,6 +55,72 @@ TEST(PlotMetrics, WritesOnePngPerNumericKeyAndToleratesACutLastLine) {
   ASSERT_EQ(files.size(), 1u);
   EXPECT_EQ(files[0].filename(), "wm_loss.png");
   EXPECT_FALSE(cv::imread(files[0].string()).empty());
+}
+
+// Rows of a learning curve in the evaluator's column order (actor/evaluator.h).
+std::string curve_row(int env_steps, const std::string& town, int success, double completion) {
+  std::ostringstream row;
+  row << env_steps << ",3,disag,zero_shot,lane_following," << town << ",straight,10,1,2,0,"
+      << success << "," << (success ? "" : "collision+lane_invasion") << ",120," << completion
+      << ",0.5\n";
+  return row.str();
+}
+const char* kCurveHeader =
+    "env_steps,policy_version,method,eval_kind,task,town,route,density,traffic_seed,spawn_seed,"
+    "episode,success,failure_reason,steps,route_completion,episode_return\n";
+
+TEST(EvalCurves, PoolEvaluatorsPerTownAndSnapshotAndPlotSuccessAndCompletion) {
+  testing::TempDir dir;
+  const auto run = dir.path() / "run";
+  std::filesystem::create_directories(run / "eval");
+  {
+    std::ofstream a(run / "eval" / "curve-0.csv");
+    a << kCurveHeader << curve_row(1000, "town01", 1, 1.0) << curve_row(1000, "town01", 0, 0.2)
+      << curve_row(2000, "town01", 1, 1.0) << curve_row(1000, "town02", 0, 0.4);
+    std::ofstream b(run / "eval" / "curve-1.csv");
+    b << kCurveHeader << curve_row(1000, "town01", 1, 0.9) << "2000,3,disag,zero";  // cut
+    std::ofstream(run / "eval" / "town01.csv") << "not,a,curve\n";  // episode rows: ignored
+  }
+  const EvalCurves curves =
+      read_eval_curves({run / "eval" / "curve-0.csv", run / "eval" / "curve-1.csv"});
+  ASSERT_EQ(curves.size(), 2u);
+  const auto& town01 = curves.at("town01");
+  ASSERT_EQ(town01.size(), 2u);
+  EXPECT_EQ(town01[0].env_steps, 1000);
+  EXPECT_EQ(town01[0].episodes, 3);
+  EXPECT_DOUBLE_EQ(town01[0].success_rate, 2.0 / 3.0);
+  EXPECT_NEAR(town01[0].route_completion, (1.0 + 0.2 + 0.9) / 3.0, 1e-9);
+  EXPECT_EQ(town01[1].episodes, 1);
+  EXPECT_DOUBLE_EQ(town01[1].success_rate, 1.0);
+  EXPECT_EQ(curves.at("town02")[0].episodes, 1);
+  EXPECT_DOUBLE_EQ(curves.at("town02")[0].success_rate, 0.0);
+
+  const auto files = plot_eval_curves(run, run / "plots");
+  ASSERT_EQ(files.size(), 2u);
+  for (const auto& file : files) EXPECT_FALSE(cv::imread(file.string()).empty()) << file;
+  // A run without learning curves draws none.
+  EXPECT_TRUE(plot_eval_curves(dir.path() / "other", dir.path() / "plots").empty());
+}
+
+TEST(EvalCurves, AMalformedRowOrAMissingColumnIsAnErrorNamingTheFile) {
+  testing::TempDir dir;
+  const auto bad_row = dir.path() / "curve-0.csv";
+  std::ofstream(bad_row) << kCurveHeader << "x" << curve_row(1000, "town01", 1, 1.0)
+                         << curve_row(2000, "town01", 1, 1.0);
+  try {
+    read_eval_curves({bad_row});
+    FAIL() << "a non-numeric env_steps must be an error";
+  } catch (const indrive::IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("curve-0.csv:2"), std::string::npos) << error.what();
+  }
+  const auto no_column = dir.path() / "curve-1.csv";
+  std::ofstream(no_column) << "env_steps,town\n1000,town01\n";
+  try {
+    read_eval_curves({no_column});
+    FAIL() << "a file without a success column must be an error";
+  } catch (const indrive::IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("'success'"), std::string::npos) << error.what();
+  }
 }
 
 TEST(CoverageMap, MergesActorFilesOfARunOnItsTrainingTown) {

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <filesystem>
+#include <map>
 #include <nlohmann/json_fwd.hpp>
 #include <opencv2/core.hpp>
 #include <optional>
@@ -51,6 +52,27 @@ std::vector<double> nice_ticks(double low, double high, int count);
 std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& metrics_jsonl,
                                                 const std::filesystem::path& out_dir,
                                                 const std::string& x_key = "env_steps");
+
+// A continuous evaluator's learning curve summarised per town: for every env-step count at
+// which a snapshot was evaluated, the episodes behind it, their success rate and their mean
+// route completion (all evaluators of the run pooled).
+struct EvalCurvePoint {
+  double env_steps = 0.0;
+  int episodes = 0;
+  double success_rate = 0.0;      // in [0, 1]
+  double route_completion = 0.0;  // mean, in [0, 1]
+};
+using EvalCurves = std::map<std::string, std::vector<EvalCurvePoint>>;  // town -> by env steps
+
+// Reads eval/curve-*.csv files (see actor/evaluator.h: curve_csv_header). A cut last line (a
+// crashed evaluator) is skipped; any other malformed row throws IoError naming file and line.
+EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files);
+
+// Writes eval_success_rate.png and eval_route_completion.png (one series per town, against env
+// steps) into `out_dir` from <run>/eval/curve-*.csv. Returns the files written; none when the
+// run has no learning-curve files.
+std::vector<std::filesystem::path> plot_eval_curves(const std::filesystem::path& run_dir,
+                                                    const std::filesystem::path& out_dir);
 
 // Draws the coverage map of a run: the training town (env.town of <run>/config.yaml) with its
 // lane pieces coloured by visits, from <run>/coverage.csv (indrive-train-local) and
