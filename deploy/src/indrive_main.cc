@@ -83,6 +83,25 @@ int main(int argc, char** argv) {
   plot_cmd->add_option("run", plot_run, "run directory")->required()->check(CLI::ExistingDirectory);
   plot_cmd->add_option("--x", plot_x, "metric on the x axis")->capture_default_str();
 
+  std::vector<fs::path> compare_runs;
+  std::string compare_metric;
+  fs::path compare_out = "compare.png";
+  auto* compare_cmd = app.add_subcommand(
+      "compare", "draw one metric of several runs (metrics.jsonl) into one PNG, a line per run");
+  compare_cmd->add_option("runs", compare_runs, "run directories")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  compare_cmd->add_option("--metric", compare_metric, "metrics.jsonl key, e.g. wm/recon")
+      ->required();
+  compare_cmd->add_option("--out", compare_out, "PNG to write")->capture_default_str();
+  compare_cmd->add_option("--x", plot_x, "metric on the x axis")->capture_default_str();
+  double compare_smoothing = 0.0;
+  compare_cmd
+      ->add_option("--smooth", compare_smoothing,
+                   "running-average weight for noisy metrics such as losses (0: none, 0.9: strong)")
+      ->check(CLI::Range(0.0, 0.999))
+      ->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
@@ -112,6 +131,12 @@ int main(int argc, char** argv) {
             " has no metrics.jsonl, coverage files or eval learning curves: is it a run "
             "directory?");
       }
+      return 0;
+    }
+    if (*compare_cmd) {
+      indrive::deploy::plot_compare(compare_runs, compare_metric, compare_out, plot_x,
+                                    compare_smoothing);
+      std::printf("%s\n", compare_out.c_str());
       return 0;
     }
     if (*report_cmd) {

@@ -20,6 +20,9 @@
 namespace indrive::deploy {
 namespace {
 
+// Series with fewer points are never smoothed (see LinePlot::set_smoothing).
+constexpr std::size_t kMinPointsToSmooth = 50;
+
 // Tableau-like colours, BGR.
 const cv::Scalar kColours[] = {{180, 119, 31},  {14, 127, 255}, {44, 160, 44},   {40, 39, 214},
                                {189, 103, 148}, {75, 86, 140},  {194, 119, 227}, {127, 127, 127}};
@@ -148,18 +151,21 @@ cv::Mat LinePlot::render(int width, int height) const {
     const auto& s = series_[k];
     const cv::Scalar colour = kColours[k % std::size(kColours)];
     const cv::Scalar faint = (colour + cv::Scalar(255, 255, 255) * 2) / 3;
+    // A short series (a fast run logs few metrics lines) is drawn as it is: an average over
+    // a handful of points would lag far behind its values.
+    const double weight = s.x.size() >= kMinPointsToSmooth ? smoothing_ : 0.0;
     std::vector<cv::Point> raw, smooth;
     double ema = std::numeric_limits<double>::quiet_NaN();
     for (std::size_t i = 0; i < s.x.size(); ++i) {
       if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
-      ema = std::isnan(ema) ? s.y[i] : smoothing_ * ema + (1.0 - smoothing_) * s.y[i];
+      ema = std::isnan(ema) ? s.y[i] : weight * ema + (1.0 - weight) * s.y[i];
       const auto p = to_pixel(s.x[i], s.y[i]);
       const auto q = to_pixel(s.x[i], ema);
       raw.emplace_back(int(std::lround(p.x)), int(std::lround(p.y)));
       smooth.emplace_back(int(std::lround(q.x)), int(std::lround(q.y)));
     }
-    if (smoothing_ > 0.0) cv::polylines(image, raw, false, faint, 1, cv::LINE_AA);
-    cv::polylines(image, smoothing_ > 0.0 ? smooth : raw, false, colour, 2, cv::LINE_AA);
+    if (weight > 0.0) cv::polylines(image, raw, false, faint, 1, cv::LINE_AA);
+    cv::polylines(image, weight > 0.0 ? smooth : raw, false, colour, 2, cv::LINE_AA);
     if (raw.size() == 1) cv::circle(image, raw[0], 3, colour, cv::FILLED, cv::LINE_AA);
     const int y = top + 18 + 18 * static_cast<int>(k);
     cv::line(image, {area.x + area.width - 150, y - 4}, {area.x + area.width - 130, y - 4}, colour,
@@ -177,12 +183,11 @@ void LinePlot::save(const std::filesystem::path& path, int width, int height) co
   atomic_write(path, png);
 }
 
-std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& metrics_jsonl,
-                                                const std::filesystem::path& out_dir,
-                                                const std::string& x_key) {
+MetricColumns read_metric_columns(const std::filesystem::path& metrics_jsonl,
+                                  const std::string& x_key) {
   std::ifstream in(metrics_jsonl);
   if (!in) throw IoError("cannot open " + metrics_jsonl.string());
-  std::map<std::string, std::pair<std::vector<double>, std::vector<double>>> columns;
+  MetricColumns columns;
   int number = 0;
   for (std::string line; std::getline(in, line);) {
     ++number;
@@ -203,11 +208,18 @@ std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& met
       columns[key].second.push_back(value.get<double>());
     }
   }
+  return columns;
+}
+
+std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& metrics_jsonl,
+                                                const std::filesystem::path& out_dir,
+                                                const std::string& x_key) {
+  MetricColumns columns = read_metric_columns(metrics_jsonl, x_key);
   std::filesystem::create_directories(out_dir);
   std::vector<std::filesystem::path> written;
   for (auto& [key, xy] : columns) {
     LinePlot plot(key, x_key, key);
-    plot.set_smoothing(xy.first.size() > 50 ? 0.9 : 0.0);
+    plot.set_smoothing(0.9);
     plot.add_series(key, std::move(xy.first), std::move(xy.second));
     std::string file = key;
     std::replace_if(
@@ -217,6 +229,30 @@ std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& met
     written.push_back(path);
   }
   return written;
+}
+
+void plot_compare(const std::vector<std::filesystem::path>& runs, const std::string& metric,
+                  const std::filesystem::path& png_path, const std::string& x_key,
+                  double smoothing) {
+  if (runs.empty()) throw std::invalid_argument("plot_compare needs at least one run");
+  LinePlot plot(metric, x_key, metric);
+  for (const auto& run : runs) {
+    const auto metrics = run / "metrics.jsonl";
+    MetricColumns columns = read_metric_columns(metrics, x_key);
+    auto found = columns.find(metric);
+    if (found == columns.end()) {
+      throw IoError(metrics.string() + " has no numeric '" + metric + "' against '" + x_key +
+                    "': see indrive plot " + run.string() + " for the metrics it has");
+    }
+    // Series are named by run folder; a trailing slash would leave the name empty.
+    const std::string name = run.lexically_normal().filename().empty()
+                                 ? run.lexically_normal().parent_path().filename().string()
+                                 : run.lexically_normal().filename().string();
+    plot.add_series(name, std::move(found->second.first), std::move(found->second.second));
+  }
+  plot.set_smoothing(smoothing);
+  if (png_path.has_parent_path()) std::filesystem::create_directories(png_path.parent_path());
+  plot.save(png_path);
 }
 
 EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files) {

@@ -57,6 +57,44 @@ TEST(PlotMetrics, WritesOnePngPerNumericKeyAndToleratesACutLastLine) {
   EXPECT_FALSE(cv::imread(files[0].string()).empty());
 }
 
+TEST(PlotCompare, DrawsOneSeriesPerRunAndNamesARunWithoutTheMetric) {
+  testing::TempDir dir;
+  const auto write_run = [&](const std::string& name, double slope, bool with_metric) {
+    const auto run = dir.path() / name;
+    std::filesystem::create_directories(run);
+    std::ofstream out(run / "metrics.jsonl");
+    for (int i = 0; i < 10; ++i) {
+      out << "{\"env_steps\": " << i * 1000;
+      if (with_metric) out << ", \"coverage_fraction_visited\": " << slope * i;
+      out << "}\n";
+    }
+    return run;
+  };
+  const auto random = write_run("random", 0.02, true);
+  const auto disag = write_run("disag", 0.03, true);
+  const auto png = dir.path() / "out" / "coverage.png";
+  plot_compare({random, disag}, "coverage_fraction_visited", png);
+  const cv::Mat image = cv::imread(png.string());
+  ASSERT_FALSE(image.empty());
+  // Both series' colours (the first two of the palette, BGR) are drawn.
+  auto count_colour = [&](cv::Vec3b colour) {
+    int n = 0;
+    for (int r = 0; r < image.rows; ++r)
+      for (int c = 0; c < image.cols; ++c) n += image.at<cv::Vec3b>(r, c) == colour;
+    return n;
+  };
+  EXPECT_GT(count_colour({180, 119, 31}), 50);
+  EXPECT_GT(count_colour({14, 127, 255}), 50);
+
+  const auto other = write_run("other", 0.0, false);
+  try {
+    plot_compare({random, other}, "coverage_fraction_visited", png);
+    FAIL() << "a run without the metric must be an error";
+  } catch (const indrive::IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("other"), std::string::npos) << error.what();
+  }
+}
+
 // Rows of a learning curve in the evaluator's column order (actor/evaluator.h).
 std::string curve_row(int env_steps, const std::string& town, int success, double completion) {
   std::ostringstream row;

@@ -21,8 +21,9 @@ class LinePlot {
 
   // Adds a named series; x and y must have the same length. Non-finite points are skipped.
   void add_series(const std::string& name, std::vector<double> x, std::vector<double> y);
-  // Smooths every series with an exponential moving average of this weight (0: none) when
-  // drawing; the raw series is drawn faintly behind it.
+  // Smooths every series of 50 points or more with an exponential moving average of this
+  // weight (0: none) when drawing; the raw series is drawn faintly behind it. Shorter series
+  // are drawn unsmoothed.
   void set_smoothing(double weight) { smoothing_ = weight; }
   bool empty() const { return series_.empty(); }
 
@@ -47,11 +48,25 @@ class LinePlot {
 // "Nice" tick positions (1, 2, 5 x 10^k steps) covering [low, high], about `count` of them.
 std::vector<double> nice_ticks(double low, double high, int count);
 
+// The numeric keys of metrics.jsonl as (x, y) columns against `x_key`; lines without x are
+// skipped, a cut last line (a crashed run) is ignored, any other bad line throws IoError.
+using MetricColumns = std::map<std::string, std::pair<std::vector<double>, std::vector<double>>>;
+MetricColumns read_metric_columns(const std::filesystem::path& metrics_jsonl,
+                                  const std::string& x_key = "env_steps");
+
 // Writes one PNG per numeric key of metrics.jsonl (other than the x key) into `out_dir`,
 // against `x_key` (default env_steps). Returns the files written.
 std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& metrics_jsonl,
                                                 const std::filesystem::path& out_dir,
                                                 const std::string& x_key = "env_steps");
+
+// One PNG comparing `metric` across runs (one series per run, named by its folder), e.g. the
+// coverage of a random-policy run against a disag run; `smoothing` as LinePlot's (none by
+// default: a running average lags a cumulative measure). A run without the metric is an
+// IoError naming it.
+void plot_compare(const std::vector<std::filesystem::path>& runs, const std::string& metric,
+                  const std::filesystem::path& png_path, const std::string& x_key = "env_steps",
+                  double smoothing = 0.0);
 
 // A continuous evaluator's learning curve summarised per town: for every env-step count at
 // which a snapshot was evaluated, the episodes behind it, their success rate and their mean
