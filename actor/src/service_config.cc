@@ -96,6 +96,10 @@ void declare_service_schema(config::Schema& schema) {
       .add_int("learner.snapshot_every", 10, "updates between PolicySnapshots", 1)
       .add_float("learner.announce_s", 1.0, "seconds between SnapshotAnnounce messages", 0.05)
       .add_float("learner.log_interval_s", 5.0, "seconds between metrics lines", 0.1)
+      .add_int("learner.log_every_env_steps", 1000,
+               "also a metrics line each time the env steps pass a multiple of this (0: off), so "
+               "fast and slow runs have comparable curves",
+               0)
       .add_float("learner.checkpoint_minutes", 5.0, "minutes between checkpoints", 0.01)
       .add_int("learner.checkpoint_keep", 3, "checkpoints kept", 1)
       .add_string("learner.init_checkpoint", "",

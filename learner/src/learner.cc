@@ -168,6 +168,7 @@ struct Learner::Impl {
     snapshot_every = c.get<std::int64_t>("learner.snapshot_every");
     announce_s = c.get<double>("learner.announce_s");
     log_interval_s = c.get<double>("learner.log_interval_s");
+    log_every_steps = c.get<std::int64_t>("learner.log_every_env_steps");
     checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
     config.config().write_yaml(run.config_path());
 
@@ -456,7 +457,9 @@ struct Learner::Impl {
 
   void log_metrics() {
     const double elapsed = seconds_since(last_log);
-    if (elapsed < log_interval_s) return;
+    const bool passed_log_step = log_every_steps > 0 && stats.counters.env_steps / log_every_steps >
+                                                            logged_steps / log_every_steps;
+    if (elapsed < log_interval_s && !passed_log_step) return;
     const std::int64_t steps = stats.counters.env_steps - logged_steps;
     const std::int64_t updates = stats.counters.updates - logged_updates;
     const double ratio = stats.counters.env_steps > 0
@@ -475,8 +478,8 @@ struct Learner::Impl {
     const double lag = interval_chunks > 0 ? interval_lag_sum / interval_chunks : 0.0;
     nlohmann::json record = {{"env_steps", stats.counters.env_steps},
                              {"updates", stats.counters.updates},
-                             {"env_steps_per_s", steps / elapsed},
-                             {"updates_per_s", updates / elapsed},
+                             {"env_steps_per_s", steps / std::max(elapsed, 1e-9)},
+                             {"updates_per_s", updates / std::max(elapsed, 1e-9)},
                              {"replay_ratio", ratio},
                              {"policy_version", stats.counters.policy_version},
                              {"policy_lag", lag},
@@ -591,6 +594,7 @@ struct Learner::Impl {
   std::int64_t snapshot_every = 10;
   double announce_s = 1.0;
   double log_interval_s = 5.0;
+  std::int64_t log_every_steps = 1000;
   double checkpoint_s = 300.0;
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;

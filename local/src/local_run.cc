@@ -133,6 +133,7 @@ struct LocalRun::Impl {
     const auto& c = service.config();
     budget = c.get<std::int64_t>("run.budget_env_steps");
     log_interval_s = c.get<double>("learner.log_interval_s");
+    log_every_steps = c.get<std::int64_t>("learner.log_every_env_steps");
     checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
     c.write_yaml(run.config_path());
     resume();
@@ -207,6 +208,11 @@ struct LocalRun::Impl {
     }
   }
 
+  // Whether the env steps passed a multiple of learner.log_every_env_steps since the last line.
+  bool passed_log_step() const {
+    return log_every_steps > 0 && env_steps() / log_every_steps > logged_steps / log_every_steps;
+  }
+
   void log_metrics() {
     const double elapsed = std::max(seconds_since(last_log), 1e-9);
     const std::int64_t steps = env_steps() - logged_steps;
@@ -267,12 +273,12 @@ struct LocalRun::Impl {
       // Small slices keep the stop signal, logging and checkpoints responsive.
       const std::int64_t slice = budget > 0 ? std::min<std::int64_t>(16, budget - env_steps()) : 16;
       trainer.run(slice, on_metrics);
-      if (seconds_since(last_log) >= log_interval_s) log_metrics();
+      if (seconds_since(last_log) >= log_interval_s || passed_log_step()) log_metrics();
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
     }
     // A session that took no step (budget already reached) leaves the files of the last one.
     if (trainer.counters().env_steps == 0) return;
-    log_metrics();
+    if (env_steps() != logged_steps) log_metrics();
     save_checkpoint();
     coverage.write_csv(run.path() / "coverage.csv");
     INDRIVE_LOG(kInfo, "local") << (stop.load() ? "stopped" : "budget reached") << ": "
@@ -295,6 +301,7 @@ struct LocalRun::Impl {
   learner::LearnerCounters base;
   std::int64_t budget = 0;
   double log_interval_s = 5.0;
+  std::int64_t log_every_steps = 1000;
   double checkpoint_s = 300.0;
   std::map<std::string, std::pair<double, std::int64_t>> interval_sums;
   std::int64_t non_finite = 0;

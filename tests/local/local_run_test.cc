@@ -230,6 +230,31 @@ TEST(LocalRunSmokeTest, PretrainWithDisagResumesAndFinetunesLaneFollowing) {
   EXPECT_FALSE(column(lines, "task/critic_loss").empty());
 }
 
+// Metrics lines come at each multiple of learner.log_every_env_steps as well as by time, so a
+// fast run (a random policy steps thousands of times a second) has a curve over env steps
+// comparable with a slow one.
+TEST(LocalRunTest, ARunLogsAMetricsLineEveryLogStepsEvenWhenFast) {
+  testing::TempDir dir;
+  const auto config = make_config(
+      dir.path() / "random", {"local.random=true", "run.budget_env_steps=700",
+                              "learner.log_interval_s=3600", "learner.log_every_env_steps=200"});
+  std::atomic<bool> stop{false};
+  LocalRun run(config);
+  run.train(stop);
+  std::vector<std::int64_t> steps;
+  for (const auto& line : read_metrics(dir.path() / "random")) {
+    steps.push_back(line["env_steps"].get<std::int64_t>());
+  }
+  // The trainer steps in slices of 16: each line comes within one slice of its multiple, and
+  // the run's end adds one line.
+  ASSERT_EQ(steps.size(), 4u);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_GE(steps[k], 200 * (k + 1));
+    EXPECT_LT(steps[k], 200 * (k + 1) + 16);
+  }
+  EXPECT_EQ(steps[3], 700);
+}
+
 // A finetune without a checkpoint to start from is refused with a clear error, before SUMO
 // starts.
 TEST(LocalRunTest, FinetuneWithoutACheckpointIsRefused) {
