@@ -145,8 +145,9 @@ cv::Mat LinePlot::render(int width, int height) const {
               font, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
   cv::putText(image, y_label_, {8, top - 8}, font, 0.45, {60, 60, 60}, 1, cv::LINE_AA);
 
-  // Series: raw faintly when smoothing, then the (smoothed) line, then the legend.
-  cv::Mat canvas = image(area).clone();
+  // Series: raw faintly when smoothing, then the (smoothed) line; the legend goes last, into
+  // the upper corner of the axes that the lines cross least.
+  std::vector<std::vector<cv::Point>> drawn;
   for (std::size_t k = 0; k < series_.size(); ++k) {
     const auto& s = series_[k];
     const cv::Scalar colour = kColours[k % std::size(kColours)];
@@ -167,11 +168,35 @@ cv::Mat LinePlot::render(int width, int height) const {
     if (weight > 0.0) cv::polylines(image, raw, false, faint, 1, cv::LINE_AA);
     cv::polylines(image, weight > 0.0 ? smooth : raw, false, colour, 2, cv::LINE_AA);
     if (raw.size() == 1) cv::circle(image, raw[0], 3, colour, cv::FILLED, cv::LINE_AA);
-    const int y = top + 18 + 18 * static_cast<int>(k);
-    cv::line(image, {area.x + area.width - 150, y - 4}, {area.x + area.width - 130, y - 4}, colour,
-             2, cv::LINE_AA);
-    cv::putText(image, s.name, {area.x + area.width - 125, y}, font, 0.45, {0, 0, 0}, 1,
-                cv::LINE_AA);
+    drawn.push_back(weight > 0.0 ? std::move(smooth) : std::move(raw));
+  }
+  int name_width = 0;
+  for (const auto& s : series_) {
+    name_width = std::max(name_width, cv::getTextSize(s.name, font, 0.45, 1, &baseline).width);
+  }
+  const int legend_w = 35 + name_width + 10;
+  const int legend_h = 18 * static_cast<int>(series_.size()) + 8;
+  const cv::Rect right_box(area.x + area.width - legend_w - 5, area.y + 5, legend_w, legend_h);
+  const cv::Rect left_box(area.x + 5, area.y + 5, legend_w, legend_h);
+  const auto crossings = [&](const cv::Rect& box) {
+    int n = 0;
+    for (const auto& line : drawn) {
+      for (std::size_t i = 0; i < line.size(); ++i) {
+        // Each segment sampled at a few points, so long segments over the box count too.
+        const cv::Point a = line[i], b = i + 1 < line.size() ? line[i + 1] : line[i];
+        for (int t = 0; t <= 4; ++t) n += box.contains(a + (b - a) * t / 4);
+      }
+    }
+    return n;
+  };
+  const cv::Rect box = crossings(left_box) < crossings(right_box) ? left_box : right_box;
+  cv::rectangle(image, box, {255, 255, 255}, cv::FILLED);
+  cv::rectangle(image, box, {200, 200, 200});
+  for (std::size_t k = 0; k < series_.size(); ++k) {
+    const cv::Scalar colour = kColours[k % std::size(kColours)];
+    const int y = box.y + 16 + 18 * static_cast<int>(k);
+    cv::line(image, {box.x + 8, y - 4}, {box.x + 28, y - 4}, colour, 2, cv::LINE_AA);
+    cv::putText(image, series_[k].name, {box.x + 35, y}, font, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
   }
   return image;
 }
