@@ -12,6 +12,9 @@
 #
 # The long run (cpu preset; hours on a laptop-class CPU):
 #   deploy/experiments/exploration_and_fewshot.sh --out runs/explore-fewshot-cpu
+# The tiny preset at 20k exploration steps (about 20 minutes per seed on 2 cores; the README's):
+#   deploy/experiments/exploration_and_fewshot.sh --preset tiny --explore-steps 20000 \
+#       --task-steps 5000 --prefill 1000 --eval-episodes 10 --eval-densities 5,10,20 --seed 0
 # A tiny run that only shows the pipeline works (minutes):
 #   deploy/experiments/exploration_and_fewshot.sh --preset tiny --explore-steps 600 \
 #       --task-steps 300 --prefill 100 --eval-episodes 1 --out /tmp/explore-fewshot-tiny
@@ -105,6 +108,10 @@ say "6/6 plots (learning curves and coverage maps)"
 for run in random disag finetune-lf dreamer-lf; do
   "$bin/indrive" plot "$out/$run" > /dev/null || echo "(no plots for $run)"
 done
+for metric in coverage_fraction_visited coverage_distinct_per_1k; do
+  "$bin/indrive" compare "$out/random" "$out/disag" --metric "$metric" \
+    --out "$out/compare-$metric.png" > /dev/null
+done
 
 sr() { sed -n 's/^evaluation [^ ]* [^ ]*: //p' "$out/$1/evaluation.txt"; }
 {
@@ -123,5 +130,5 @@ sr() { sed -n 's/^evaluation [^ ]* [^ ]*: //p' "$out/$1/evaluation.txt"; }
   printf '  %-34s %s\n' "dreamer from scratch" "$(sr dreamer-lf)"
   printf '  %-34s %s\n' "random policy (reference)" "$(sr random)"
   echo
-  echo "coverage maps: $out/{random,disag}/plots/coverage_map.png"
+  echo "coverage maps: $out/{random,disag}/plots/coverage_map.png; over time: $out/compare-*.png"
 } | tee "$out/summary.txt"
