@@ -155,4 +155,8 @@ void MetricsLog::write(const nlohmann::json& record) {
   if (!out_) throw IoError("cannot append to " + path_.string() + " (disk full?)");
 }
 
+bool passed_multiple(std::int64_t before, std::int64_t now, std::int64_t every) {
+  return every > 0 && now / every > before / every;
+}
+
 }  // namespace indrive

@@ -457,9 +457,10 @@ struct Learner::Impl {
 
   void log_metrics() {
     const double elapsed = seconds_since(last_log);
-    const bool passed_log_step = log_every_steps > 0 && stats.counters.env_steps / log_every_steps >
-                                                            logged_steps / log_every_steps;
-    if (elapsed < log_interval_s && !passed_log_step) return;
+    if (elapsed < log_interval_s &&
+        !passed_multiple(logged_steps, stats.counters.env_steps, log_every_steps)) {
+      return;
+    }
     const std::int64_t steps = stats.counters.env_steps - logged_steps;
     const std::int64_t updates = stats.counters.updates - logged_updates;
     const double ratio = stats.counters.env_steps > 0

@@ -208,11 +208,6 @@ struct LocalRun::Impl {
     }
   }
 
-  // Whether the env steps passed a multiple of learner.log_every_env_steps since the last line.
-  bool passed_log_step() const {
-    return log_every_steps > 0 && env_steps() / log_every_steps > logged_steps / log_every_steps;
-  }
-
   void log_metrics() {
     const double elapsed = std::max(seconds_since(last_log), 1e-9);
     const std::int64_t steps = env_steps() - logged_steps;
@@ -273,7 +268,10 @@ struct LocalRun::Impl {
       // Small slices keep the stop signal, logging and checkpoints responsive.
       const std::int64_t slice = budget > 0 ? std::min<std::int64_t>(16, budget - env_steps()) : 16;
       trainer.run(slice, on_metrics);
-      if (seconds_since(last_log) >= log_interval_s || passed_log_step()) log_metrics();
+      if (seconds_since(last_log) >= log_interval_s ||
+          passed_multiple(logged_steps, env_steps(), log_every_steps)) {
+        log_metrics();
+      }
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
     }
     // A session that took no step (budget already reached) leaves the files of the last one.

@@ -62,6 +62,15 @@ TEST(CheckpointFiles, KeepsTheNewestNAndIgnoresInterruptedWrites) {
   EXPECT_EQ(checkpoints.newest()->filename(), "ckpt-000000004000.bin");
 }
 
+TEST(PassedMultiple, OnlyWhenACounterCrossesAMultiple) {
+  EXPECT_TRUE(passed_multiple(990, 1008, 1000));
+  EXPECT_TRUE(passed_multiple(999, 1000, 1000));
+  EXPECT_TRUE(passed_multiple(0, 2500, 1000));
+  EXPECT_FALSE(passed_multiple(1000, 1999, 1000));
+  EXPECT_FALSE(passed_multiple(1008, 1008, 1000));
+  EXPECT_FALSE(passed_multiple(0, 5000, 0));  // off
+}
+
 TEST(MetricsLog, AppendsOneParsableObjectPerLine) {
   testing::TempDir dir;
   const fs::path path = dir.path() / "metrics.jsonl";

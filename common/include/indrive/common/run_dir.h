@@ -93,4 +93,9 @@ class MetricsLog {
   std::ofstream out_;
 };
 
+// Whether a counter moved past a multiple of `every` between `before` and `now` (false when
+// `every` <= 0): the learner and the local trainer write a metrics line at each multiple of
+// learner.log_every_env_steps as well as by time.
+bool passed_multiple(std::int64_t before, std::int64_t now, std::int64_t every);
+
 }  // namespace indrive
