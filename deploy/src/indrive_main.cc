@@ -86,11 +86,17 @@ int main(int argc, char** argv) {
   std::vector<fs::path> compare_runs;
   std::string compare_metric;
   fs::path compare_out = "compare.png";
+  std::vector<std::string> compare_groups;
   auto* compare_cmd = app.add_subcommand(
-      "compare", "draw one metric of several runs (metrics.jsonl) into one PNG, a line per run");
-  compare_cmd->add_option("runs", compare_runs, "run directories")
-      ->required()
+      "compare",
+      "draw one metric of several runs (metrics.jsonl) into one PNG, a line per run or per "
+      "group of runs");
+  compare_cmd->add_option("runs", compare_runs, "run directories, each its own line")
       ->check(CLI::ExistingDirectory);
+  compare_cmd->add_option("--group", compare_groups,
+                          "LABEL=RUN[,RUN...]: runs drawn as one line, their mean, with a band "
+                          "from the lowest to the highest (e.g. the seeds of one method); "
+                          "repeatable");
   compare_cmd->add_option("--metric", compare_metric, "metrics.jsonl key, e.g. wm/recon")
       ->required();
   compare_cmd->add_option("--out", compare_out, "PNG to write")->capture_default_str();
@@ -134,8 +140,23 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*compare_cmd) {
-      indrive::deploy::plot_compare(compare_runs, compare_metric, compare_out, plot_x,
-                                    compare_smoothing);
+      if (compare_runs.empty() && compare_groups.empty()) {
+        throw std::invalid_argument("compare: name run directories or --group LABEL=RUN,RUN");
+      }
+      std::vector<indrive::deploy::CompareGroup> groups;
+      for (const auto& run : compare_runs) {
+        groups.push_back(indrive::deploy::single_run_group(run));
+      }
+      for (const auto& spec : compare_groups) {
+        groups.push_back(indrive::deploy::parse_compare_group(spec));
+        for (const auto& run : groups.back().runs) {
+          if (!fs::is_directory(run)) {
+            throw std::invalid_argument("--group " + spec + ": " + run.string() +
+                                        " is not a directory");
+          }
+        }
+      }
+      indrive::deploy::plot_compare(groups, compare_metric, compare_out, plot_x, compare_smoothing);
       std::printf("%s\n", compare_out.c_str());
       return 0;
     }

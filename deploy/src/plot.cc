@@ -12,6 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
+#include <stdexcept>
 
 #include "indrive/common/run_dir.h"
 #include "indrive/envserver/coverage.h"
@@ -78,7 +79,19 @@ void LinePlot::add_series(const std::string& name, std::vector<double> x, std::v
     throw std::invalid_argument("series '" + name + "': x has " + std::to_string(x.size()) +
                                 " points, y has " + std::to_string(y.size()));
   }
-  series_.push_back({name, std::move(x), std::move(y)});
+  series_.push_back({name, std::move(x), std::move(y), {}, {}});
+}
+
+void LinePlot::add_series(const std::string& name, std::vector<double> x, std::vector<double> y,
+                          std::vector<double> low, std::vector<double> high) {
+  if (low.size() != x.size() || high.size() != x.size()) {
+    throw std::invalid_argument("series '" + name + "': x has " + std::to_string(x.size()) +
+                                " points, its band " + std::to_string(low.size()) + " and " +
+                                std::to_string(high.size()));
+  }
+  add_series(name, std::move(x), std::move(y));
+  series_.back().low = std::move(low);
+  series_.back().high = std::move(high);
 }
 
 cv::Mat LinePlot::render(int width, int height) const {
@@ -96,6 +109,13 @@ cv::Mat LinePlot::render(int width, int height) const {
       x_max = std::max(x_max, s.x[i]);
       y_min = std::min(y_min, s.y[i]);
       y_max = std::max(y_max, s.y[i]);
+    }
+    for (std::size_t i = 0; i < s.low.size(); ++i) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.low[i]) || !std::isfinite(s.high[i])) {
+        continue;
+      }
+      y_min = std::min(y_min, s.low[i]);
+      y_max = std::max(y_max, s.high[i]);
     }
   }
   // Title centred over the axes, clear of the y-axis label in the top-left corner.
@@ -144,6 +164,27 @@ cv::Mat LinePlot::render(int width, int height) const {
   cv::putText(image, x_label_, {area.x + area.width / 2 - 4 * int(x_label_.size()), height - 12},
               font, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
   cv::putText(image, y_label_, {8, top - 8}, font, 0.45, {60, 60, 60}, 1, cv::LINE_AA);
+
+  // Bands first, lightly, so that no band hides another series' line.
+  for (std::size_t k = 0; k < series_.size(); ++k) {
+    const auto& s = series_[k];
+    std::vector<cv::Point> upper, lower;
+    for (std::size_t i = 0; i < s.low.size(); ++i) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.low[i]) || !std::isfinite(s.high[i])) {
+        continue;
+      }
+      const auto hi = to_pixel(s.x[i], s.high[i]);
+      const auto lo = to_pixel(s.x[i], s.low[i]);
+      upper.emplace_back(int(std::lround(hi.x)), int(std::lround(hi.y)));
+      lower.emplace_back(int(std::lround(lo.x)), int(std::lround(lo.y)));
+    }
+    if (upper.size() < 2) continue;
+    upper.insert(upper.end(), lower.rbegin(), lower.rend());
+    cv::Mat layer = image.clone();
+    cv::fillPoly(layer, std::vector<std::vector<cv::Point>>{upper},
+                 kColours[k % std::size(kColours)], cv::LINE_AA);
+    cv::addWeighted(layer, 0.2, image, 0.8, 0.0, image);
+  }
 
   // Series: raw faintly when smoothing, then the (smoothed) line; the legend goes last, into
   // the upper corner of the axes that the lines cross least.
@@ -256,28 +297,131 @@ std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& met
   return written;
 }
 
-void plot_compare(const std::vector<std::filesystem::path>& runs, const std::string& metric,
+MeanBand mean_band(const std::vector<std::pair<std::vector<double>, std::vector<double>>>& runs,
+                   int points) {
+  if (runs.empty() || points < 2) {
+    throw std::invalid_argument("mean_band needs at least one run and two points");
+  }
+  // Each run's finite points, sorted by x (a resumed run may log an x again: the later wins).
+  std::vector<std::vector<std::pair<double, double>>> sorted;
+  double from = -std::numeric_limits<double>::infinity();
+  double to = std::numeric_limits<double>::infinity();
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    const auto& [xs, ys] = runs[r];
+    std::vector<std::pair<double, double>> run;
+    for (std::size_t i = 0; i < std::min(xs.size(), ys.size()); ++i) {
+      if (std::isfinite(xs[i]) && std::isfinite(ys[i])) run.emplace_back(xs[i], ys[i]);
+    }
+    if (run.empty()) {
+      throw std::invalid_argument("run " + std::to_string(r + 1) + " has no finite points");
+    }
+    std::stable_sort(run.begin(), run.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    from = std::max(from, run.front().first);
+    to = std::min(to, run.back().first);
+    sorted.push_back(std::move(run));
+  }
+  if (from > to) {
+    throw std::invalid_argument("the runs cover no common x range (one ends at " +
+                                std::to_string(to) + ", another starts at " + std::to_string(from) +
+                                ")");
+  }
+  const auto at = [](const std::vector<std::pair<double, double>>& run, double x) {
+    // The last point at or before x and the first after it.
+    const auto after = std::upper_bound(run.begin(), run.end(), x,
+                                        [](double v, const auto& p) { return v < p.first; });
+    if (after == run.begin()) return run.front().second;
+    const auto& a = *(after - 1);
+    if (after == run.end() || a.first == x) return a.second;
+    return a.second + (after->second - a.second) * (x - a.first) / (after->first - a.first);
+  };
+  MeanBand band;
+  const int n = from == to ? 1 : points;
+  for (int i = 0; i < n; ++i) {
+    const double x = n == 1 ? from : from + (to - from) * i / (n - 1);
+    double sum = 0.0, low = std::numeric_limits<double>::infinity(), high = -low;
+    for (const auto& run : sorted) {
+      const double y = at(run, x);
+      sum += y;
+      low = std::min(low, y);
+      high = std::max(high, y);
+    }
+    band.x.push_back(x);
+    band.mean.push_back(sum / static_cast<double>(sorted.size()));
+    band.low.push_back(low);
+    band.high.push_back(high);
+  }
+  return band;
+}
+
+CompareGroup single_run_group(const std::filesystem::path& run) {
+  // A trailing slash would leave the folder name empty.
+  const auto normal = run.lexically_normal();
+  return {normal.filename().empty() ? normal.parent_path().filename().string()
+                                    : normal.filename().string(),
+          {run}};
+}
+
+CompareGroup parse_compare_group(const std::string& spec) {
+  const auto equals = spec.find('=');
+  const char* form = "': write LABEL=RUN[,RUN...], e.g. disag=runs/s0/disag,runs/s1/disag";
+  if (equals == std::string::npos || equals == 0 || equals + 1 == spec.size()) {
+    throw std::invalid_argument("group '" + spec + form);
+  }
+  CompareGroup group{spec.substr(0, equals), {}};
+  std::istringstream runs(spec.substr(equals + 1));
+  for (std::string run; std::getline(runs, run, ',');) {
+    if (run.empty()) throw std::invalid_argument("group '" + spec + "' names an empty run" + form);
+    group.runs.emplace_back(run);
+  }
+  return group;
+}
+
+void plot_compare(const std::vector<CompareGroup>& groups, const std::string& metric,
                   const std::filesystem::path& png_path, const std::string& x_key,
                   double smoothing) {
-  if (runs.empty()) throw std::invalid_argument("plot_compare needs at least one run");
+  if (groups.empty()) throw std::invalid_argument("plot_compare needs at least one run");
   LinePlot plot(metric, x_key, metric);
-  for (const auto& run : runs) {
-    const auto metrics = run / "metrics.jsonl";
-    MetricColumns columns = read_metric_columns(metrics, x_key);
-    auto found = columns.find(metric);
-    if (found == columns.end()) {
-      throw IoError(metrics.string() + " has no numeric '" + metric + "' against '" + x_key +
-                    "': see indrive plot " + run.string() + " for the metrics it has");
+  for (const auto& group : groups) {
+    if (group.runs.empty()) {
+      throw std::invalid_argument("group '" + group.label + "' has no runs");
     }
-    // Series are named by run folder; a trailing slash would leave the name empty.
-    const std::string name = run.lexically_normal().filename().empty()
-                                 ? run.lexically_normal().parent_path().filename().string()
-                                 : run.lexically_normal().filename().string();
-    plot.add_series(name, std::move(found->second.first), std::move(found->second.second));
+    std::vector<std::pair<std::vector<double>, std::vector<double>>> series;
+    for (const auto& run : group.runs) {
+      const auto metrics = run / "metrics.jsonl";
+      MetricColumns columns = read_metric_columns(metrics, x_key);
+      auto found = columns.find(metric);
+      if (found == columns.end()) {
+        throw IoError(metrics.string() + " has no numeric '" + metric + "' against '" + x_key +
+                      "': see indrive plot " + run.string() + " for the metrics it has");
+      }
+      series.push_back(std::move(found->second));
+    }
+    if (series.size() == 1) {
+      plot.add_series(group.label, std::move(series[0].first), std::move(series[0].second));
+      continue;
+    }
+    MeanBand band;
+    try {
+      band = mean_band(series);
+    } catch (const std::invalid_argument& error) {
+      throw std::invalid_argument("group '" + group.label + "': " + error.what());
+    }
+    plot.add_series(group.label + " (mean of " + std::to_string(series.size()) + ", band min-max)",
+                    std::move(band.x), std::move(band.mean), std::move(band.low),
+                    std::move(band.high));
   }
   plot.set_smoothing(smoothing);
   if (png_path.has_parent_path()) std::filesystem::create_directories(png_path.parent_path());
   plot.save(png_path);
+}
+
+void plot_compare(const std::vector<std::filesystem::path>& runs, const std::string& metric,
+                  const std::filesystem::path& png_path, const std::string& x_key,
+                  double smoothing) {
+  std::vector<CompareGroup> groups;
+  for (const auto& run : runs) groups.push_back(single_run_group(run));
+  plot_compare(groups, metric, png_path, x_key, smoothing);
 }
 
 EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files) {

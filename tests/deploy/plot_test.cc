@@ -95,6 +95,76 @@ TEST(PlotCompare, DrawsOneSeriesPerRunAndNamesARunWithoutTheMetric) {
   }
 }
 
+TEST(MeanBand, AveragesRunsInterpolatedOverTheirCommonRange) {
+  // Run a: y = x on 0..10 at every 2; run b: y = 2x on 1..9 at odd x, given out of order.
+  const MeanBand band = mean_band(
+      {{{0, 2, 4, 6, 8, 10}, {0, 2, 4, 6, 8, 10}}, {{9, 1, 3, 5, 7}, {18, 2, 6, 10, 14}}}, 5);
+  ASSERT_EQ(band.x, (std::vector<double>{1, 3, 5, 7, 9}));
+  for (std::size_t i = 0; i < band.x.size(); ++i) {
+    const double x = band.x[i];
+    EXPECT_DOUBLE_EQ(band.mean[i], 1.5 * x);
+    EXPECT_DOUBLE_EQ(band.low[i], x);
+    EXPECT_DOUBLE_EQ(band.high[i], 2 * x);
+  }
+  // Runs that do not overlap, or have no finite point, cannot be averaged.
+  EXPECT_THROW(mean_band({{{0, 1}, {0, 1}}, {{2, 3}, {0, 1}}}), std::invalid_argument);
+  EXPECT_THROW(mean_band({{{0, 1}, {NAN, NAN}}}), std::invalid_argument);
+}
+
+TEST(CompareGroup, ParsesLabelAndRunsAndSaysTheFormOtherwise) {
+  const CompareGroup group = parse_compare_group("disag=runs/s0/disag,runs/s1/disag");
+  EXPECT_EQ(group.label, "disag");
+  EXPECT_EQ(group.runs, (std::vector<std::filesystem::path>{"runs/s0/disag", "runs/s1/disag"}));
+  for (const char* bad : {"runs/s0", "=runs/s0", "disag=", "disag=a,,b"}) {
+    try {
+      parse_compare_group(bad);
+      ADD_FAILURE() << bad << " must be rejected";
+    } catch (const std::invalid_argument& error) {
+      EXPECT_NE(std::string(error.what()).find("LABEL=RUN"), std::string::npos) << error.what();
+    }
+  }
+  EXPECT_EQ(single_run_group("runs/x/disag/").label, "disag");
+}
+
+TEST(PlotCompare, DrawsAGroupAsItsMeanWithABandBetweenItsRuns) {
+  testing::TempDir dir;
+  const auto write_run = [&](const std::string& name, double slope) {
+    const auto run = dir.path() / name;
+    std::filesystem::create_directories(run);
+    std::ofstream out(run / "metrics.jsonl");
+    for (int i = 0; i < 10; ++i) {
+      out << "{\"env_steps\": " << i * 1000 << ", \"coverage\": " << slope * i << "}\n";
+    }
+    return run;
+  };
+  const auto low = write_run("s0", 0.01), high = write_run("s1", 0.05);
+  const auto png = dir.path() / "group.png";
+  plot_compare({CompareGroup{"disag", {low, high}}}, "coverage", png);
+  const cv::Mat image = cv::imread(png.string());
+  ASSERT_FALSE(image.empty());
+  // The mean line is drawn in the first colour; the band is a light tint of it that fills the
+  // wedge between the two runs: at the right end, halfway between mean and the high run.
+  int line = 0;
+  for (int r = 0; r < image.rows; ++r)
+    for (int c = 0; c < image.cols; ++c)
+      line += image.at<cv::Vec3b>(r, c) == cv::Vec3b(180, 119, 31);
+  EXPECT_GT(line, 50);
+  // Axes: x 0..9,000 over columns 80..780; y 0..0.45 (the band's extremes) plus 5% padding
+  // over rows 425..40. At x = 5,000 the runs are at 0.05 and 0.25 and their mean at 0.15.
+  const double y_min = -0.0225, y_max = 0.4725;
+  const auto row_of = [&](double y) {
+    return int(std::lround(425 - (y - y_min) / (y_max - y_min) * (425 - 40)));
+  };
+  const int column = int(std::lround(80 + 700 * 5000.0 / 9000.0));
+  const cv::Vec3b inside = image.at<cv::Vec3b>(row_of(0.2), column);    // mean to high run
+  const cv::Vec3b outside = image.at<cv::Vec3b>(row_of(0.35), column);  // above the band
+  EXPECT_EQ(outside, cv::Vec3b(255, 255, 255));
+  EXPECT_NE(inside, cv::Vec3b(255, 255, 255));
+  EXPECT_GT(inside[0], inside[2]) << "the band is tinted with the series' (blue) colour";
+
+  EXPECT_THROW(plot_compare({CompareGroup{"empty", {}}}, "coverage", png), std::invalid_argument);
+}
+
 // Rows of a learning curve in the evaluator's column order (actor/evaluator.h).
 std::string curve_row(int env_steps, const std::string& town, int success, double completion) {
   std::ostringstream row;

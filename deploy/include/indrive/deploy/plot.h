@@ -21,6 +21,10 @@ class LinePlot {
 
   // Adds a named series; x and y must have the same length. Non-finite points are skipped.
   void add_series(const std::string& name, std::vector<double> x, std::vector<double> y);
+  // Adds a named series with a shaded band from `low` to `high` around it (e.g. the spread of
+  // training seeds around their mean); all four must have the same length.
+  void add_series(const std::string& name, std::vector<double> x, std::vector<double> y,
+                  std::vector<double> low, std::vector<double> high);
   // Smooths every series of 50 points or more with an exponential moving average of this
   // weight (0: none) when drawing; the raw series is drawn faintly behind it. Shorter series
   // are drawn unsmoothed.
@@ -37,6 +41,7 @@ class LinePlot {
     std::string name;
     std::vector<double> x;
     std::vector<double> y;
+    std::vector<double> low, high;  // empty: no band
   };
   std::string title_;
   std::string x_label_;
@@ -60,10 +65,38 @@ std::vector<std::filesystem::path> plot_metrics(const std::filesystem::path& met
                                                 const std::filesystem::path& out_dir,
                                                 const std::string& x_key = "env_steps");
 
-// One PNG comparing `metric` across runs (one series per run, named by its folder), e.g. the
-// coverage of a random-policy run against a disag run; `smoothing` as LinePlot's (none by
-// default: a running average lags a cumulative measure). A run without the metric is an
-// IoError naming it.
+// Several runs of one configuration (e.g. its training seeds) reduced to one curve: every
+// run's (x, y) series, sorted by x, is interpolated linearly at `points` x values spread evenly
+// over the x range that all runs cover; `mean` is their average there, `low` and `high` the
+// smallest and largest run. Throws std::invalid_argument when a run is empty or the runs share
+// no x range.
+struct MeanBand {
+  std::vector<double> x, mean, low, high;
+};
+MeanBand mean_band(const std::vector<std::pair<std::vector<double>, std::vector<double>>>& runs,
+                   int points = 200);
+
+// Runs drawn as one curve by plot_compare: one run as its own line, several as their mean with
+// a min-max band.
+struct CompareGroup {
+  std::string label;
+  std::vector<std::filesystem::path> runs;
+};
+// One run as its own group, labelled by its folder name.
+CompareGroup single_run_group(const std::filesystem::path& run);
+// Parses "LABEL=RUN[,RUN...]" (the command line's --group); throws std::invalid_argument
+// saying what the form is when the label or the runs are missing.
+CompareGroup parse_compare_group(const std::string& spec);
+
+// One PNG comparing `metric` across groups of runs, e.g. the coverage of random-policy runs
+// against disag runs over several seeds; a group of one run is its line, a group of several
+// is labelled "LABEL (mean of N, band min-max)" and drawn with the band between its lowest and highest run.
+// `smoothing` as LinePlot's (none by default: a running average lags a cumulative measure). A
+// run without the metric is an IoError naming it.
+void plot_compare(const std::vector<CompareGroup>& groups, const std::string& metric,
+                  const std::filesystem::path& png_path, const std::string& x_key = "env_steps",
+                  double smoothing = 0.0);
+// The same with one line per run, named by its folder.
 void plot_compare(const std::vector<std::filesystem::path>& runs, const std::string& metric,
                   const std::filesystem::path& png_path, const std::string& x_key = "env_steps",
                   double smoothing = 0.0);
