@@ -15,6 +15,10 @@
 # The tiny preset at 20k exploration steps (about 20 minutes per seed on 2 cores; the README's):
 #   deploy/experiments/exploration_and_fewshot.sh --preset tiny --explore-steps 20000 \
 #       --task-steps 5000 --prefill 1000 --eval-episodes 10 --eval-densities 5,10,20 --seed 0
+# Extra configuration for every run (repeatable), e.g. shorter replay windows so that the cpu
+# preset makes four times as many updates for the same compute:
+#   deploy/experiments/exploration_and_fewshot.sh --explore-steps 20000 --task-steps 5000 \
+#       --eval-densities 5,10,20 --set agent.replay.length=16
 # A tiny run that only shows the pipeline works (minutes):
 #   deploy/experiments/exploration_and_fewshot.sh --preset tiny --explore-steps 600 \
 #       --task-steps 300 --prefill 100 --eval-episodes 1 --out /tmp/explore-fewshot-tiny
@@ -32,8 +36,9 @@ eval_densities=10     # densities of the evaluation, comma-separated (5, 10, 20)
 route=straight
 town=town01
 seed=0
+extra=()              # --set KEY=VALUE for every run
 
-usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --bin) bin=$2; shift 2 ;;
@@ -47,6 +52,7 @@ while [[ $# -gt 0 ]]; do
     --route) route=$2; shift 2 ;;
     --town) town=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
+    --set) extra+=(--set "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -61,7 +67,7 @@ fi
 mkdir -p "$out"
 say() { printf '\033[1m[experiment]\033[0m %s\n' "$*"; }
 common=(--set "preset=$preset" --set "run.seed=$seed" --set "env.town=$town"
-        --set "agent.replay.prefill=$prefill")
+        --set "agent.replay.prefill=$prefill" ${extra[@]+"${extra[@]}"})
 
 # Last value of a key in a run's metrics.jsonl.
 last_metric() {
@@ -117,6 +123,7 @@ sr() { sed -n 's/^evaluation [^ ]* [^ ]*: //p' "$out/$1/evaluation.txt"; }
 {
   echo
   echo "exploration on $town, $explore_steps env steps each ($preset preset, seed $seed)"
+  [[ ${#extra[@]} -eq 0 ]] || echo "every run with: ${extra[*]}"
   printf '  %-40s %12s %12s\n' "measure" "random" "disag"
   printf '  %-40s %12s %12s\n' "distinct lane segments per 1k env steps" \
     "$(last_metric "$out/random" coverage_distinct_per_1k)" \
