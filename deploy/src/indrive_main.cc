@@ -93,10 +93,13 @@ int main(int argc, char** argv) {
       "group of runs");
   compare_cmd->add_option("runs", compare_runs, "run directories, each its own line")
       ->check(CLI::ExistingDirectory);
-  compare_cmd->add_option("--group", compare_groups,
-                          "LABEL=RUN[,RUN...]: runs drawn as one line, their mean, with a band "
-                          "from the lowest to the highest (e.g. the seeds of one method); "
-                          "repeatable");
+  compare_cmd
+      ->add_option("--group", compare_groups,
+                   "LABEL=RUN[,RUN...]: runs drawn as one line, their mean, with a band from the "
+                   "lowest to the highest (e.g. the seeds of one method); repeatable")
+      ->expected(1)
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   compare_cmd->add_option("--metric", compare_metric, "metrics.jsonl key, e.g. wm/recon")
       ->required();
   compare_cmd->add_option("--out", compare_out, "PNG to write")->capture_default_str();
@@ -156,8 +159,15 @@ int main(int argc, char** argv) {
           }
         }
       }
-      indrive::deploy::plot_compare(groups, compare_metric, compare_out, plot_x, compare_smoothing);
+      const auto ends = indrive::deploy::plot_compare(groups, compare_metric, compare_out, plot_x,
+                                                      compare_smoothing);
       std::printf("%s\n", compare_out.c_str());
+      // The figures behind the picture, where each line ends.
+      for (const auto& end : ends) {
+        std::printf("  %-40s %s %.6g: %.6g", end.label.c_str(), plot_x.c_str(), end.x, end.y);
+        if (end.low != end.high) std::printf(" (%.6g to %.6g)", end.low, end.high);
+        std::printf("\n");
+      }
       return 0;
     }
     if (*report_cmd) {

@@ -377,11 +377,13 @@ CompareGroup parse_compare_group(const std::string& spec) {
   return group;
 }
 
-void plot_compare(const std::vector<CompareGroup>& groups, const std::string& metric,
-                  const std::filesystem::path& png_path, const std::string& x_key,
-                  double smoothing) {
+std::vector<CompareEnd> plot_compare(const std::vector<CompareGroup>& groups,
+                                     const std::string& metric,
+                                     const std::filesystem::path& png_path,
+                                     const std::string& x_key, double smoothing) {
   if (groups.empty()) throw std::invalid_argument("plot_compare needs at least one run");
   LinePlot plot(metric, x_key, metric);
+  std::vector<CompareEnd> ends;
   for (const auto& group : groups) {
     if (group.runs.empty()) {
       throw std::invalid_argument("group '" + group.label + "' has no runs");
@@ -398,7 +400,14 @@ void plot_compare(const std::vector<CompareGroup>& groups, const std::string& me
       series.push_back(std::move(found->second));
     }
     if (series.size() == 1) {
-      plot.add_series(group.label, std::move(series[0].first), std::move(series[0].second));
+      auto& [xs, ys] = series[0];
+      for (std::size_t i = xs.size(); i-- > 0;) {
+        if (std::isfinite(xs[i]) && std::isfinite(ys[i])) {
+          ends.push_back({group.label, xs[i], ys[i], ys[i], ys[i]});
+          break;
+        }
+      }
+      plot.add_series(group.label, std::move(xs), std::move(ys));
       continue;
     }
     MeanBand band;
@@ -407,21 +416,25 @@ void plot_compare(const std::vector<CompareGroup>& groups, const std::string& me
     } catch (const std::invalid_argument& error) {
       throw std::invalid_argument("group '" + group.label + "': " + error.what());
     }
-    plot.add_series(group.label + " (mean of " + std::to_string(series.size()) + ", band min-max)",
-                    std::move(band.x), std::move(band.mean), std::move(band.low),
+    const std::string label =
+        group.label + " (mean of " + std::to_string(series.size()) + ", band min-max)";
+    ends.push_back({label, band.x.back(), band.mean.back(), band.low.back(), band.high.back()});
+    plot.add_series(label, std::move(band.x), std::move(band.mean), std::move(band.low),
                     std::move(band.high));
   }
   plot.set_smoothing(smoothing);
   if (png_path.has_parent_path()) std::filesystem::create_directories(png_path.parent_path());
   plot.save(png_path);
+  return ends;
 }
 
-void plot_compare(const std::vector<std::filesystem::path>& runs, const std::string& metric,
-                  const std::filesystem::path& png_path, const std::string& x_key,
-                  double smoothing) {
+std::vector<CompareEnd> plot_compare(const std::vector<std::filesystem::path>& runs,
+                                     const std::string& metric,
+                                     const std::filesystem::path& png_path,
+                                     const std::string& x_key, double smoothing) {
   std::vector<CompareGroup> groups;
   for (const auto& run : runs) groups.push_back(single_run_group(run));
-  plot_compare(groups, metric, png_path, x_key, smoothing);
+  return plot_compare(groups, metric, png_path, x_key, smoothing);
 }
 
 EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files) {

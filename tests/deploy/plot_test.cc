@@ -73,7 +73,12 @@ TEST(PlotCompare, DrawsOneSeriesPerRunAndNamesARunWithoutTheMetric) {
   const auto random = write_run("random", 0.02, true);
   const auto disag = write_run("disag", 0.03, true);
   const auto png = dir.path() / "out" / "coverage.png";
-  plot_compare({random, disag}, "coverage_fraction_visited", png);
+  const auto ends = plot_compare({random, disag}, "coverage_fraction_visited", png);
+  ASSERT_EQ(ends.size(), 2u);
+  EXPECT_EQ(ends[1].label, "disag");
+  EXPECT_DOUBLE_EQ(ends[1].x, 9000);
+  EXPECT_NEAR(ends[1].y, 0.27, 1e-12);
+  EXPECT_EQ(ends[1].low, ends[1].high);
   const cv::Mat image = cv::imread(png.string());
   ASSERT_FALSE(image.empty());
   // Both series' colours (the first two of the palette, BGR) are drawn.
@@ -139,7 +144,13 @@ TEST(PlotCompare, DrawsAGroupAsItsMeanWithABandBetweenItsRuns) {
   };
   const auto low = write_run("s0", 0.01), high = write_run("s1", 0.05);
   const auto png = dir.path() / "group.png";
-  plot_compare({CompareGroup{"disag", {low, high}}}, "coverage", png);
+  const auto ends = plot_compare({CompareGroup{"disag", {low, high}}}, "coverage", png);
+  ASSERT_EQ(ends.size(), 1u);
+  EXPECT_EQ(ends[0].label, "disag (mean of 2, band min-max)");
+  EXPECT_DOUBLE_EQ(ends[0].x, 9000);
+  EXPECT_NEAR(ends[0].y, 0.27, 1e-12);
+  EXPECT_NEAR(ends[0].low, 0.09, 1e-12);
+  EXPECT_NEAR(ends[0].high, 0.45, 1e-12);
   const cv::Mat image = cv::imread(png.string());
   ASSERT_FALSE(image.empty());
   // The mean line is drawn in the first colour; the band is a light tint of it that fills the

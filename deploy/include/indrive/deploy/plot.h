@@ -88,18 +88,30 @@ CompareGroup single_run_group(const std::filesystem::path& run);
 // saying what the form is when the label or the runs are missing.
 CompareGroup parse_compare_group(const std::string& spec);
 
+// Where a line of a compare plot ends: its last x, the (mean) value there and, for a group,
+// its lowest and highest run there (both the value for a single run).
+struct CompareEnd {
+  std::string label;
+  double x = 0.0, y = 0.0, low = 0.0, high = 0.0;
+};
+
 // One PNG comparing `metric` across groups of runs, e.g. the coverage of random-policy runs
 // against disag runs over several seeds; a group of one run is its line, a group of several
-// is labelled "LABEL (mean of N, band min-max)" and drawn with the band between its lowest and highest run.
-// `smoothing` as LinePlot's (none by default: a running average lags a cumulative measure). A
-// run without the metric is an IoError naming it.
-void plot_compare(const std::vector<CompareGroup>& groups, const std::string& metric,
-                  const std::filesystem::path& png_path, const std::string& x_key = "env_steps",
-                  double smoothing = 0.0);
+// is labelled "LABEL (mean of N, band min-max)" and drawn with the band between its lowest and
+// highest run. `smoothing` as LinePlot's (none by default: a running average lags a cumulative
+// measure). A run without the metric is an IoError naming it. Returns where each line ends, so
+// that the figures can be quoted beside the picture.
+std::vector<CompareEnd> plot_compare(const std::vector<CompareGroup>& groups,
+                                     const std::string& metric,
+                                     const std::filesystem::path& png_path,
+                                     const std::string& x_key = "env_steps",
+                                     double smoothing = 0.0);
 // The same with one line per run, named by its folder.
-void plot_compare(const std::vector<std::filesystem::path>& runs, const std::string& metric,
-                  const std::filesystem::path& png_path, const std::string& x_key = "env_steps",
-                  double smoothing = 0.0);
+std::vector<CompareEnd> plot_compare(const std::vector<std::filesystem::path>& runs,
+                                     const std::string& metric,
+                                     const std::filesystem::path& png_path,
+                                     const std::string& x_key = "env_steps",
+                                     double smoothing = 0.0);
 
 // A continuous evaluator's learning curve summarised per town: for every env-step count at
 // which a snapshot was evaluated, the episodes behind it, their success rate and their mean

@@ -1,0 +1,74 @@
+// The indrive program's subcommands as a user types them (argument parsing, printed figures,
+// exit codes); what they draw and compute is tested in plot_test and report_test.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+
+#include "child_process.h"
+#include "testing.h"
+
+namespace indrive {
+namespace {
+
+using namespace std::chrono_literals;
+
+const std::filesystem::path kIndrive = std::filesystem::path(INDRIVE_BIN_DIR) / "indrive";
+
+std::filesystem::path write_run(const std::filesystem::path& dir, double slope) {
+  std::filesystem::create_directories(dir);
+  std::ofstream out(dir / "metrics.jsonl");
+  for (int i = 0; i <= 10; ++i) {
+    out << "{\"env_steps\": " << i * 100 << ", \"coverage\": " << slope * i << "}\n";
+  }
+  return dir;
+}
+
+TEST(IndriveCompare, GroupsAndRunsMixAndTheirEndsArePrinted) {
+  testing::TempDir dir;
+  const auto a = write_run(dir.path() / "s0", 0.01).string();
+  const auto b = write_run(dir.path() / "s1", 0.03).string();
+  const auto single = write_run(dir.path() / "random", 0.02).string();
+  const auto png = dir.path() / "coverage.png";
+  const auto log = dir.path() / "compare.log";
+  // A --group takes one value: the run after it stays a positional run.
+  testing::Child compare({kIndrive.string(), "compare", "--group", "disag=" + a + "," + b, single,
+                          "--metric", "coverage", "--out", png.string()},
+                         log);
+  ASSERT_EQ(compare.wait(30s), 0) << testing::slurp(log);
+  EXPECT_TRUE(std::filesystem::exists(png));
+  const std::string output = testing::slurp(log);
+  EXPECT_NE(output.find("random"), std::string::npos) << output;
+  EXPECT_NE(output.find("env_steps 1000: 0.2\n"), std::string::npos) << output;
+  EXPECT_NE(output.find("disag (mean of 2, band min-max)"), std::string::npos) << output;
+  EXPECT_NE(output.find("env_steps 1000: 0.2 (0.1 to 0.3)"), std::string::npos) << output;
+}
+
+TEST(IndriveCompare, NothingToCompareOrABadGroupIsAnErrorThatSaysWhatToWrite) {
+  testing::TempDir dir;
+  const auto log = dir.path() / "compare.log";
+  testing::Child none({kIndrive.string(), "compare", "--metric", "coverage"}, log);
+  EXPECT_NE(none.wait(30s), 0);
+  EXPECT_NE(testing::slurp(log).find("--group LABEL=RUN"), std::string::npos)
+      << testing::slurp(log);
+
+  const auto run = write_run(dir.path() / "s0", 0.01).string();
+  const auto bad_log = dir.path() / "bad.log";
+  testing::Child bad({kIndrive.string(), "compare", "--group", run, "--metric", "coverage"},
+                     bad_log);
+  EXPECT_NE(bad.wait(30s), 0);
+  EXPECT_NE(testing::slurp(bad_log).find("LABEL=RUN[,RUN...]"), std::string::npos)
+      << testing::slurp(bad_log);
+
+  const auto missing_log = dir.path() / "missing.log";
+  testing::Child missing(
+      {kIndrive.string(), "compare", "--group",
+       "disag=" + run + "," + (dir.path() / "nowhere").string(), "--metric", "coverage"},
+      missing_log);
+  EXPECT_NE(missing.wait(30s), 0);
+  EXPECT_NE(testing::slurp(missing_log).find("is not a directory"), std::string::npos)
+      << testing::slurp(missing_log);
+}
+
+}  // namespace
+}  // namespace indrive
