@@ -428,15 +428,6 @@ std::vector<CompareEnd> plot_compare(const std::vector<CompareGroup>& groups,
   return ends;
 }
 
-std::vector<CompareEnd> plot_compare(const std::vector<std::filesystem::path>& runs,
-                                     const std::string& metric,
-                                     const std::filesystem::path& png_path,
-                                     const std::string& x_key, double smoothing) {
-  std::vector<CompareGroup> groups;
-  for (const auto& run : runs) groups.push_back(single_run_group(run));
-  return plot_compare(groups, metric, png_path, x_key, smoothing);
-}
-
 EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files) {
   struct Sum {
     int episodes = 0;

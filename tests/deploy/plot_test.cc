@@ -73,7 +73,8 @@ TEST(PlotCompare, DrawsOneSeriesPerRunAndNamesARunWithoutTheMetric) {
   const auto random = write_run("random", 0.02, true);
   const auto disag = write_run("disag", 0.03, true);
   const auto png = dir.path() / "out" / "coverage.png";
-  const auto ends = plot_compare({random, disag}, "coverage_fraction_visited", png);
+  const auto ends = plot_compare({single_run_group(random), single_run_group(disag)},
+                                 "coverage_fraction_visited", png);
   ASSERT_EQ(ends.size(), 2u);
   EXPECT_EQ(ends[1].label, "disag");
   EXPECT_DOUBLE_EQ(ends[1].x, 9000);
@@ -93,7 +94,8 @@ TEST(PlotCompare, DrawsOneSeriesPerRunAndNamesARunWithoutTheMetric) {
 
   const auto other = write_run("other", 0.0, false);
   try {
-    plot_compare({random, other}, "coverage_fraction_visited", png);
+    plot_compare({single_run_group(random), single_run_group(other)}, "coverage_fraction_visited",
+                 png);
     FAIL() << "a run without the metric must be an error";
   } catch (const indrive::IoError& error) {
     EXPECT_NE(std::string(error.what()).find("other"), std::string::npos) << error.what();

@@ -106,12 +106,6 @@ std::vector<CompareEnd> plot_compare(const std::vector<CompareGroup>& groups,
                                      const std::filesystem::path& png_path,
                                      const std::string& x_key = "env_steps",
                                      double smoothing = 0.0);
-// The same with one line per run, named by its folder.
-std::vector<CompareEnd> plot_compare(const std::vector<std::filesystem::path>& runs,
-                                     const std::string& metric,
-                                     const std::filesystem::path& png_path,
-                                     const std::string& x_key = "env_steps",
-                                     double smoothing = 0.0);
 
 // A continuous evaluator's learning curve summarised per town: for every env-step count at
 // which a snapshot was evaluated, the episodes behind it, their success rate and their mean
