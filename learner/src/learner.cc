@@ -371,6 +371,8 @@ struct Learner::Impl {
         replay.sample(agent_config.replay.batch, agent_config.replay.length);
     try {
       last_metrics = agent.train_step(batch);
+      const agent::TrainMetrics timing = agent.last_timing().as_metrics();
+      last_metrics.insert(last_metrics.end(), timing.begin(), timing.end());
     } catch (const std::exception& error) {
       // A failed update is counted and skipped; the run goes on.
       ++stats.failed_updates;

@@ -263,7 +263,10 @@ struct LocalRun::Impl {
     last_log = last_checkpoint = Clock::now();
     logged_steps = env_steps();
     logged_updates = updates();
-    const auto on_metrics = [this](const agent::TrainMetrics& step) { on_update(step); };
+    const auto on_metrics = [this](const agent::TrainMetrics& step) {
+      on_update(step);
+      on_update(trainer.agent().last_timing().as_metrics());
+    };
     while (!stop.load() && (budget <= 0 || env_steps() < budget)) {
       // Small slices keep the stop signal, logging and checkpoints responsive.
       const std::int64_t slice = budget > 0 ? std::min<std::int64_t>(16, budget - env_steps()) : 16;

@@ -1,5 +1,6 @@
 #include "indrive/common/agent/agent.h"
 
+#include <chrono>
 #include <cstring>
 #include <fstream>
 #include <type_traits>
@@ -80,7 +81,28 @@ std::vector<std::int64_t> architecture(const AgentConfig& c) {
           c.behavior.units,
           c.behavior.layers};
 }
+// Seconds since the last call (or construction): one stage of an update at a time.
+class StageClock {
+ public:
+  double lap() {
+    const auto now = std::chrono::steady_clock::now();
+    const double s = std::chrono::duration<double>(now - last_).count();
+    last_ = now;
+    return s;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
 }  // namespace
+
+TrainMetrics StepTiming::as_metrics() const {
+  auto f = [](double s) { return static_cast<float>(s); };
+  return {{"time/world_model_s", f(world_model)}, {"time/intrinsic_s", f(intrinsic)},
+          {"time/imagine_s", f(imagine)},         {"time/reward_s", f(reward)},
+          {"time/behavior_s", f(behavior)},       {"time/backward_s", f(backward)},
+          {"time/optimizers_s", f(optimizers)},   {"time/update_s", f(total())}};
+}
 
 Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   validate(config_);
@@ -124,6 +146,8 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     throw AgentError(std::string("a ") + std::string(to_string(phase)) +
                      " batch has no rewards; task phases need a replay buffer with rewards");
   }
+  StageClock clock;
+  timing_ = {};
   nn::Graph& graph = nn::current_graph();
   graph.reset();
   TrainMetrics metrics;
@@ -151,6 +175,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
                                  {"wm/rep", out.rep},
                                  {"wm/cont", out.cont}});
   if (task_phase) metrics.emplace_back("wm/reward", out.reward);
+  timing_.world_model = clock.lap();
 
   // Intrinsic module: trained on replay transitions in pretraining only.
   if (phase == Phase::kPretrain) {
@@ -160,12 +185,14 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     Tensor intrinsic_loss = intrinsic_->loss(tr);
     total = nn::add(total, intrinsic_loss);
     metrics.emplace_back("intrinsic/loss", intrinsic_->last_loss());
+    timing_.intrinsic = clock.lap();
   }
 
   // Behaviour in imagination from every posterior state.
   ActorCritic& behavior = task_phase ? *task_ : *expl_;
   const RssmState start{nn::stop_gradient(out.deter), nn::stop_gradient(out.stoch)};
   ImaginedTrajectory traj = behavior.imagine(*wm_, start, rng_);
+  timing_.imagine = clock.lap();
   std::vector<float> rewards;
   {
     nn::NoGradGuard no_grad;
@@ -176,6 +203,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
       rewards = intrinsic_->reward(traj.state_features(), traj.actions, traj.next_features());
     }
   }
+  timing_.reward = clock.lap();
   BehaviorMetrics bm;
   total = nn::add(total, behavior.loss(traj, rewards, &bm));
   const std::string prefix = task_phase ? "task/" : "expl/";
@@ -185,10 +213,12 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
                                  {prefix + "actor_loss", bm.actor_loss},
                                  {prefix + "critic_loss", bm.critic_loss},
                                  {prefix + "entropy", bm.entropy}});
+  timing_.behavior = clock.lap();
 
   // One backward for all losses; stop-gradients keep each loss inside its own part, and only
   // the optimisers of the parts that train in this phase are stepped.
   graph.backward(total);
+  timing_.backward = clock.lap();
   if (phase != Phase::kFinetune) {
     const nn::StepStats s = wm_opt_->step();
     metrics.emplace_back("wm/grad_norm", s.grad_norm);
@@ -202,6 +232,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   // Gradients that reached frozen parts (none should) are dropped, never applied later.
   wm_->params().zero_grad();
   intrinsic_->params().zero_grad();
+  timing_.optimizers = clock.lap();
   ++train_steps_;
   return metrics;
 }

@@ -1,7 +1,8 @@
 // Benchmark: seconds per world-model update (the same work as the reference PyTorch script in
 // shared/bench) and per full agent update (world model + intrinsic module + imagination +
-// actor-critic) for a preset.
+// actor-critic) for a preset, and where the agent update's time goes by stage.
 // Usage: common_agent_bench [--preset tiny|cpu|small] [--threads N] [--iters N] [--method disag]
+//                           [--set agent.KEY=VALUE ...]  (e.g. --set replay.length=16)
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -73,6 +74,7 @@ struct Samples {
 
 int main(int argc, char** argv) {
   std::string preset = "tiny", method = "disag";
+  std::vector<std::string> sets;
   int threads = 2, iters = 5;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
@@ -84,11 +86,27 @@ int main(int argc, char** argv) {
       iters = std::atoi(argv[i + 1]);
     else if (key == "--method")
       method = argv[i + 1];
+    else if (key == "--set")
+      sets.push_back(argv[i + 1]);
+    else {
+      std::fprintf(stderr,
+                   "common_agent_bench: unknown option %s (see the usage at the top of "
+                   "agent_bench.cc)\n",
+                   key.c_str());
+      return 2;
+    }
   }
   try {
     nn::set_threads(threads);
     AgentConfig config = indrive::agent::preset(preset);
     indrive::agent::set_config_value(config, "intrinsic.method", method);
+    for (const std::string& kv : sets) {
+      const std::size_t eq = kv.find('=');
+      if (eq == std::string::npos) throw std::runtime_error("--set wants KEY=VALUE, got " + kv);
+      std::string key = kv.substr(0, eq);
+      if (key.rfind("agent.", 0) == 0) key = key.substr(6);
+      indrive::agent::set_config_value(config, key, kv.substr(eq + 1));
+    }
     indrive::agent::Agent agent(config);
     const SequenceBatch batch = random_batch(config, 1);
     const double frames = static_cast<double>(batch.batch) * batch.length;
@@ -97,6 +115,7 @@ int main(int argc, char** argv) {
     nn::Adam adam(agent.world_model().params(), {.lr = 1e-4f, .eps = 1e-8f, .clip = 1000.0f});
     nn::Rng rng(1);
     Samples wm_samples, agent_samples;
+    std::vector<indrive::agent::StepTiming> stages;
     for (int i = 0; i <= iters; ++i) {
       const auto t0 = std::chrono::steady_clock::now();
       const Usage u0 = Usage::now();
@@ -110,7 +129,7 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       const Usage u0 = Usage::now();
       agent.train_step(batch);
-      if (i > 0) agent_samples.add(t0, u0);
+      if (i > 0) agent_samples.add(t0, u0), stages.push_back(agent.last_timing());
     }
     std::int64_t params = 0;
     for (auto* g : agent.groups()) params += g->numel();
@@ -127,6 +146,23 @@ int main(int argc, char** argv) {
         "imagined_states_per_sec=%.0f\n",
         full, median(agent_samples.cpu), median(agent_samples.faults), frames / full,
         frames * config.behavior.horizon / full);
+    // Median of each stage over the measured updates, and its share of their sum.
+    std::printf("agent_update_stages");
+    double stage_sum = 0;
+    std::vector<std::pair<std::string, double>> medians;
+    for (const auto& [name, unused] : indrive::agent::StepTiming{}.as_metrics()) {
+      if (name == "time/update_s") continue;
+      std::vector<double> v;
+      for (const auto& s : stages) {
+        for (const auto& [n, x] : s.as_metrics())
+          if (n == name) v.push_back(x);
+      }
+      medians.emplace_back(name.substr(5, name.size() - 7), median(v));
+      stage_sum += medians.back().second;
+    }
+    for (const auto& [name, sec] : medians)
+      std::printf(" %s=%.3f(%.0f%%)", name.c_str(), sec, stage_sum > 0 ? 100 * sec / stage_sum : 0);
+    std::printf("\n");
     std::printf("arena_mb=%.0f arena_system_allocations=%zu\n",
                 nn::current_graph().arena_capacity_bytes() / 1e6,
                 nn::current_graph().arena_system_allocations());

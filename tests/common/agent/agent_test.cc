@@ -63,6 +63,29 @@ TEST(Agent, PretrainStepsWithEachMethodAreFiniteAndRewardFree) {
   }
 }
 
+TEST(Agent, StageTimingCoversTheStagesThatRunInEachPhase) {
+  nn::set_threads(1);
+  ReplayBuffer with = dot_replay(true, 60), without = dot_replay(false, 60);
+  Agent pretrain(tiny_config(Phase::kPretrain));
+  EXPECT_EQ(pretrain.last_timing().total(), 0.0);  // nothing measured before the first step
+  pretrain.train_step(without.sample(2, 8));
+  const StepTiming p = pretrain.last_timing();
+  for (double s : {p.world_model, p.intrinsic, p.imagine, p.reward, p.behavior, p.backward})
+    EXPECT_GT(s, 0.0);
+  EXPECT_GE(p.optimizers, 0.0);
+  const TrainMetrics m = p.as_metrics();
+  ASSERT_EQ(m.size(), 8u);
+  EXPECT_EQ(m.back().first, "time/update_s");
+  EXPECT_FLOAT_EQ(m.back().second, static_cast<float>(p.total()));
+  EXPECT_FLOAT_EQ(metric(m, "time/reward_s"), static_cast<float>(p.reward));
+
+  // Fine-tuning trains no intrinsic module: its stage is not run, and is zero.
+  Agent finetune(tiny_config(Phase::kFinetune));
+  finetune.train_step(with.sample(2, 8));
+  EXPECT_EQ(finetune.last_timing().intrinsic, 0.0);
+  EXPECT_GT(finetune.last_timing().world_model, 0.0);
+}
+
 TEST(Agent, RejectsRewardsInPretrainingAndTheirAbsenceInTaskPhases) {
   ReplayBuffer with = dot_replay(true, 60), without = dot_replay(false, 60);
   Agent pretrain(tiny_config(Phase::kPretrain));

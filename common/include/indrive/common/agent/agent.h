@@ -40,6 +40,24 @@ class AgentError : public std::runtime_error {
 // Named scalars of one training step, in a stable order.
 using TrainMetrics = std::vector<std::pair<std::string, float>>;
 
+// Wall seconds of the stages of one train_step: where an update's time goes. Kept apart from
+// TrainMetrics, which depend only on the data, parameters and RNG (bitwise reproducible).
+struct StepTiming {
+  double world_model = 0;  // observe: encoder, RSSM over the batch, decoder, heads, losses
+  double intrinsic = 0;    // the intrinsic module's loss on replay transitions (pretrain only)
+  double imagine = 0;      // rollouts of the horizon through the prior with the acting policy
+  double reward = 0;       // rewards of the imagined transitions (intrinsic or reward head)
+  double behavior = 0;     // actor-critic losses: critics, lambda-returns, REINFORCE
+  double backward = 0;     // the one backward pass for all losses
+  double optimizers = 0;   // optimiser steps of the parts that train in the phase
+
+  double total() const {
+    return world_model + intrinsic + imagine + reward + behavior + backward + optimizers;
+  }
+  // As "time/<stage>_s" metrics (and "time/update_s" for the sum).
+  TrainMetrics as_metrics() const;
+};
+
 // Everything the learner holds for training.
 class Agent {
  public:
@@ -55,6 +73,8 @@ class Agent {
   Phase phase() const { return config_.phase; }
   const AgentConfig& config() const { return config_; }
   std::int64_t train_steps() const { return train_steps_; }
+  // Stage timing of the last train_step.
+  const StepTiming& last_timing() const { return timing_; }
 
   // Parameters actors need (world model and the acting actor), as a serialized blob.
   std::vector<std::uint8_t> snapshot() const;
@@ -90,6 +110,7 @@ class Agent {
   std::unique_ptr<nn::Adam> reward_opt_;
   std::int64_t train_steps_ = 0;
   bool task_actor_initialised_ = false;
+  StepTiming timing_;
 };
 
 }  // namespace indrive::agent
