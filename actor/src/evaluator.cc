@@ -1,6 +1,5 @@
 #include "indrive/actor/evaluator.h"
 
-#include <cctype>
 #include <chrono>
 #include <climits>
 #include <cstdio>
@@ -10,6 +9,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "indrive/actor/episode_video.h"
 #include "indrive/actor/eval_policy.h"
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/common/check.h"
@@ -17,17 +17,11 @@
 #include "indrive/common/episode_csv.h"
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
-#include "indrive/envserver/bev.h"
-#include "indrive/envserver/camera.h"
-#include "indrive/envserver/video.h"
 
 namespace indrive::actor {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-// Frames a fired event stays on screen after the episode ends (1 s at 10 Hz).
-constexpr int kEventHoldFrames = 10;
 
 std::vector<std::string> split_list(const std::string& text) {
   std::vector<std::string> items;
@@ -41,86 +35,12 @@ std::vector<std::string> split_list(const std::string& text) {
   return items;
 }
 
-// A town spec as a file-name part: a map path keeps only its stem, odd characters become '_'.
-std::string file_part(const std::string& text) {
-  std::string part = std::filesystem::path(text).stem().string();
-  if (part.empty()) part = text;
-  for (char& c : part) {
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-') c = '_';
-  }
-  return part;
-}
-
 // What one finished episode gives.
 struct EpisodeOutcome {
   std::uint32_t events = 0;  // the last step's events, time_limit added when the budget ran out
   int steps = 0;
   double route_completion = 0.0;
   double episode_return = 0.0;
-};
-
-// Records one episode: camera | bird's-eye view with the route, text lines, and the events in a
-// band while they fire (held for a second at the end, when the episode stops on them).
-class EpisodeVideo {
- public:
-  EpisodeVideo(const std::filesystem::path& path, const env::Env& env, const EpisodeSpec& spec,
-               int budget)
-      : path_(path), bev_(env::BevConfig{}, env.scene()), spec_(spec), budget_(budget) {
-    if (env.route() != nullptr) {
-      for (const env::Waypoint& w : env.route()->waypoints()) route_.push_back(w.position);
-      route_length_m_ = env.route()->length_m();
-    }
-  }
-
-  void add(const env::Env& env, const env::StepResult& result) {
-    const std::uint32_t events = result.events;
-    const cv::Mat camera = env::colorize(result.observation);
-    const cv::Mat bev = bev_.render(env.ego_box(), env.traffic_boxes(),
-                                    {.route = route_, .alert = env::is_failure(events)});
-    char line[96];
-    std::vector<std::string> lines;
-    lines.push_back(spec_.town + " " + spec_.route + " d" + std::to_string(spec_.density) + " ep" +
-                    std::to_string(spec_.episode));
-    std::snprintf(line, sizeof(line), "step %d / %d", result.step, budget_);
-    lines.emplace_back(line);
-    std::snprintf(line, sizeof(line), "speed %.1f m/s", result.ego.speed_mps);
-    lines.emplace_back(line);
-    const double progress =
-        route_length_m_ > 0.0 ? 100.0 * result.route_progress_m / route_length_m_ : 0.0;
-    std::snprintf(line, sizeof(line), "route %.0f%% (%.0f m)", progress, result.route_progress_m);
-    lines.emplace_back(line);
-    cv::Mat frame = env::compose_frame(camera, bev, lines, 384);
-    if (events != 0) {
-      // Over the camera half only, so the bird's-eye view stays whole.
-      cv::Mat camera_part = frame(cv::Rect(0, 0, std::min(frame.cols, frame.rows), frame.rows));
-      env::draw_banner(camera_part, env::event_names(events),
-                       env::is_failure(events) ? cv::Scalar(200, 30, 30) : cv::Scalar(30, 150, 60));
-    }
-    if (!writer_) writer_ = std::make_unique<env::VideoWriter>(path_, frame.size(), 10.0);
-    writer_->write(frame);
-    last_ = frame;
-  }
-
-  // Ends the video, holding the last frame (and the budget-ran-out band) for a moment.
-  void finish(std::uint32_t final_events, bool budget_ran_out) {
-    if (!writer_) return;
-    if (budget_ran_out) {
-      cv::Mat camera_part = last_(cv::Rect(0, 0, std::min(last_.cols, last_.rows), last_.rows));
-      env::draw_banner(camera_part, env::event_names(final_events));
-    }
-    for (int i = 0; i < kEventHoldFrames; ++i) writer_->write(last_);
-    writer_->close();
-  }
-
- private:
-  std::filesystem::path path_;
-  env::BirdsEyeView bev_;
-  EpisodeSpec spec_;
-  int budget_;
-  std::vector<Eigen::Vector2d> route_;
-  double route_length_m_ = 0.0;
-  std::unique_ptr<env::VideoWriter> writer_;
-  cv::Mat last_;
 };
 
 // Appends learning-curve rows, writing the header first when the file is new.
@@ -305,11 +225,7 @@ struct Evaluator::Impl {
     policy->begin(*env, spec);
     std::optional<EpisodeVideo> video;
     if (spec.episode < c.get<int>("eval.video_episodes")) {
-      video.emplace(
-          config.run_dir() / "videos" /
-              ("eval-" + file_part(spec.town) + "-" + spec.route + "-" +
-               std::to_string(spec.density) + "-" + std::to_string(spec.episode) + ".mp4"),
-          *env, spec, budget);
+      video.emplace(episode_video_path(config.run_dir() / "videos", spec), *env, spec, budget);
       video->add(*env, step);
     }
     EpisodeOutcome outcome;

@@ -5,9 +5,11 @@
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/episode_video.h"
 #include "indrive/actor/eval_policy.h"
 #include "indrive/actor/protocol.h"
 #include "indrive/common/agent/local_trainer.h"
@@ -378,6 +380,11 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
     const int budget = actor::route_step_budget(
         driven->length_m(), config.config().get<double>("eval.budget_speed_mps"),
         config.config().get<double>("eval.budget_slack"));
+    std::optional<actor::EpisodeVideo> video;
+    if (spec.episode < config.config().get<int>("eval.video_episodes")) {
+      video.emplace(actor::episode_video_path(run.videos(), spec), env, spec, budget);
+      video->add(env, step);
+    }
     agent::PolicyState state;
     double episode_return = 0.0;
     while (!step.is_last && step.step < budget && !stop.load()) {
@@ -388,9 +395,11 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
                                                step.is_first, state);
       step = env.step(action);
       episode_return += step.reward.value_or(0.0);
+      if (video) video->add(env, step);
     }
     if (!step.is_last && step.step < budget) break;  // stopped
     const std::uint32_t events = step.is_last ? step.events : step.events | env::kTimeLimit;
+    if (video) video->finish(events, !step.is_last);
     const double completion =
         driven->length_m() <= 0.0 ? 0.0 : std::min(1.0, step.route_progress_m / driven->length_m());
     EpisodeRecord record =

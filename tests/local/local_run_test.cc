@@ -22,6 +22,8 @@
 #include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/videoio.hpp>
+#include <sstream>
 
 #include "indrive/common/run_dir.h"
 #include "testing.h"
@@ -253,6 +255,47 @@ TEST(LocalRunTest, ARunLogsAMetricsLineEveryLogStepsEvenWhenFast) {
     EXPECT_LT(steps[k], 200 * (k + 1) + 16);
   }
   EXPECT_EQ(steps[3], 700);
+}
+
+// The local evaluation records the first eval.video_episodes episodes of each density, as the
+// evaluator does: one frame after the reset and after every step, then a second (10 frames) of
+// the last frame.
+TEST(LocalRunTest, EvaluationRecordsTheFirstEpisodesOfEachDensityAsVideo) {
+  testing::TempDir dir;
+  const fs::path run_dir = dir.path() / "random";
+  const auto config = make_config(run_dir, {"local.random=true", "eval.densities=5",
+                                            "eval.video_episodes=1", "env.route=straight"});
+  std::atomic<bool> stop{false};
+  const EvaluationSummary summary = evaluate_locally(config, "straight", 2, stop);
+  ASSERT_EQ(summary.episodes, 2);
+
+  std::ifstream csv(run_dir / "eval" / "local-town01-straight.csv");
+  std::string header, first;
+  ASSERT_TRUE(std::getline(csv, header) && std::getline(csv, first));
+  // The steps column of the first episode.
+  auto field = [](const std::string& line, int index) {
+    std::stringstream in(line);
+    std::string cell;
+    for (int i = 0; i <= index; ++i) std::getline(in, cell, ',');
+    return cell;
+  };
+  int steps_column = -1;
+  for (int i = 0; !field(header, i).empty(); ++i) {
+    if (field(header, i) == "steps") steps_column = i;
+    if (i > 50) break;
+  }
+  ASSERT_GE(steps_column, 0);
+  const int steps = std::stoi(field(first, steps_column));
+
+  const fs::path video = run_dir / "videos" / "eval-town01-straight-5-0.mp4";
+  ASSERT_TRUE(fs::exists(video));
+  EXPECT_FALSE(fs::exists(run_dir / "videos" / "eval-town01-straight-5-1.mp4"));
+  cv::VideoCapture capture(video.string(), cv::CAP_FFMPEG);
+  ASSERT_TRUE(capture.isOpened());
+  int frames = 0;
+  cv::Mat frame;
+  while (capture.read(frame)) ++frames;
+  EXPECT_EQ(frames, 1 + steps + 10);
 }
 
 // A finetune without a checkpoint to start from is refused with a clear error, before SUMO

@@ -84,8 +84,9 @@ struct EvaluationSummary {
 // agent.eval_sample is set; random actions when local.random is set) on `route` of env.town:
 // `episodes` episodes per density of eval.densities with the protocol's traffic and spawn seeds
 // (actor/protocol.h). An episode succeeds when it reaches the route's destination without a
-// failure event. Appends one row per episode to <run>/eval/local-<town>-<route>.csv. Throws
-// LocalRunError when the run has no checkpoint (and is not random).
+// failure event. Appends one row per episode to <run>/eval/local-<town>-<route>.csv, and records
+// the first eval.video_episodes episodes of every density to <run>/videos/eval-*.mp4 (the
+// evaluator's videos). Throws LocalRunError when the run has no checkpoint (and is not random).
 EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std::string& route,
                                    int episodes, const std::atomic<bool>& stop);
 
