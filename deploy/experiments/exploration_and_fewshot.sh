@@ -19,6 +19,8 @@
 # preset makes four times as many updates for the same compute:
 #   deploy/experiments/exploration_and_fewshot.sh --explore-steps 20000 --task-steps 5000 \
 #       --eval-densities 5,10,20 --set agent.replay.length=16
+# --video-episodes N records the first N evaluation episodes of each density as MP4 under
+# <run>/videos/ (camera, bird's-eye view, events), to see how the policies fail.
 # A tiny run that only shows the pipeline works (minutes):
 #   deploy/experiments/exploration_and_fewshot.sh --preset tiny --explore-steps 600 \
 #       --task-steps 300 --prefill 100 --eval-episodes 1 --out /tmp/explore-fewshot-tiny
@@ -37,8 +39,9 @@ route=straight
 town=town01
 seed=0
 extra=()              # --set KEY=VALUE for every run
+video_episodes=0      # evaluation episodes per density recorded as video
 
-usage() { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --bin) bin=$2; shift 2 ;;
@@ -53,6 +56,7 @@ while [[ $# -gt 0 ]]; do
     --town) town=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
     --set) extra+=(--set "$2"); shift 2 ;;
+    --video-episodes) video_episodes=$2; shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -103,6 +107,7 @@ say "4/6 dreamer from scratch on lane following, $task_steps env steps"
 say "5/6 evaluation on $route: $eval_episodes episode(s) per density of [$eval_densities]"
 evaluate() {
   "$train" --config "$2" --run-dir "$out/$1" "${common[@]}" --set "eval.densities=$eval_densities" \
+    --set "eval.video_episodes=$video_episodes" \
     --evaluate-episodes "$eval_episodes" --route "$route" "${@:3}" --log-level warn |
     tee "$out/$1/evaluation.txt"
 }
@@ -138,4 +143,5 @@ sr() { sed -n 's/^evaluation [^ ]* [^ ]*: //p' "$out/$1/evaluation.txt"; }
   printf '  %-34s %s\n' "random policy (reference)" "$(sr random)"
   echo
   echo "coverage maps: $out/{random,disag}/plots/coverage_map.png; over time: $out/compare-*.png"
+  [[ $video_episodes -eq 0 ]] || echo "evaluation videos: $out/{finetune-lf,dreamer-lf,random}/videos/"
 } | tee "$out/summary.txt"
