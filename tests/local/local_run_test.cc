@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -257,6 +258,27 @@ TEST(LocalRunTest, ARunLogsAMetricsLineEveryLogStepsEvenWhenFast) {
   EXPECT_EQ(steps[3], 700);
 }
 
+// One column of a CSV file with a header row, by name (cells hold no commas here).
+std::vector<std::string> csv_column(const fs::path& file, const std::string& name) {
+  std::ifstream in(file);
+  std::vector<std::vector<std::string>> rows;
+  for (std::string line; std::getline(in, line);) {
+    std::vector<std::string> cells;
+    std::stringstream row(line);
+    for (std::string cell; std::getline(row, cell, ',');) cells.push_back(cell);
+    rows.push_back(std::move(cells));
+  }
+  std::vector<std::string> column;
+  if (rows.empty()) return column;
+  const auto at = std::find(rows[0].begin(), rows[0].end(), name);
+  if (at == rows[0].end()) return column;
+  const std::size_t index = static_cast<std::size_t>(at - rows[0].begin());
+  for (std::size_t r = 1; r < rows.size(); ++r) {
+    column.push_back(index < rows[r].size() ? rows[r][index] : "");
+  }
+  return column;
+}
+
 // The local evaluation records the first eval.video_episodes episodes of each density, as the
 // evaluator does: one frame after the reset and after every step, then a second (10 frames) of
 // the last frame.
@@ -269,23 +291,9 @@ TEST(LocalRunTest, EvaluationRecordsTheFirstEpisodesOfEachDensityAsVideo) {
   const EvaluationSummary summary = evaluate_locally(config, "straight", 2, stop);
   ASSERT_EQ(summary.episodes, 2);
 
-  std::ifstream csv(run_dir / "eval" / "local-town01-straight.csv");
-  std::string header, first;
-  ASSERT_TRUE(std::getline(csv, header) && std::getline(csv, first));
-  // The steps column of the first episode.
-  auto field = [](const std::string& line, int index) {
-    std::stringstream in(line);
-    std::string cell;
-    for (int i = 0; i <= index; ++i) std::getline(in, cell, ',');
-    return cell;
-  };
-  int steps_column = -1;
-  for (int i = 0; !field(header, i).empty(); ++i) {
-    if (field(header, i) == "steps") steps_column = i;
-    if (i > 50) break;
-  }
-  ASSERT_GE(steps_column, 0);
-  const int steps = std::stoi(field(first, steps_column));
+  const auto steps_column = csv_column(run_dir / "eval" / "local-town01-straight.csv", "steps");
+  ASSERT_EQ(steps_column.size(), 2u);
+  const int steps = std::stoi(steps_column[0]);
 
   const fs::path video = run_dir / "videos" / "eval-town01-straight-5-0.mp4";
   ASSERT_TRUE(fs::exists(video));
@@ -296,6 +304,30 @@ TEST(LocalRunTest, EvaluationRecordsTheFirstEpisodesOfEachDensityAsVideo) {
   cv::Mat frame;
   while (capture.read(frame)) ++frames;
   EXPECT_EQ(frames, 1 + steps + 10);
+}
+
+// The local evaluation, like the evaluator, ends an episode at the route's step budget
+// (eval.budget_speed_mps and eval.budget_slack), not at the training time limit
+// env.time_limit_steps: with a 10-step env limit, random episodes still run until they fail or
+// the budget (303 m at 30 m/s with 1.5x slack: 152 steps) runs out.
+TEST(LocalRunTest, EvaluationEndsEpisodesAtTheRouteBudgetNotTheEnvTimeLimit) {
+  testing::TempDir dir;
+  const fs::path run_dir = dir.path() / "random";
+  const auto config =
+      make_config(run_dir, {"local.random=true", "eval.densities=5", "env.time_limit_steps=10",
+                            "eval.budget_speed_mps=30", "env.route=straight"});
+  std::atomic<bool> stop{false};
+  ASSERT_EQ(evaluate_locally(config, "straight", 3, stop).episodes, 3);
+  const fs::path csv = run_dir / "eval" / "local-town01-straight.csv";
+  const auto steps = csv_column(csv, "steps");
+  const auto reasons = csv_column(csv, "failure_reason");
+  ASSERT_EQ(steps.size(), 3u);
+  ASSERT_EQ(reasons.size(), 3u);
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    EXPECT_GT(std::stoi(steps[i]), 10) << "episode " << i << " ended by " << reasons[i];
+    EXPECT_LE(std::stoi(steps[i]), 152) << "episode " << i;
+    if (reasons[i] == "time_limit") EXPECT_EQ(std::stoi(steps[i]), 152) << "episode " << i;
+  }
 }
 
 // A finetune without a checkpoint to start from is refused with a clear error, before SUMO

@@ -91,9 +91,10 @@ TEST(TrainLocalMainTest, SigtermCheckpointsAndTheNextStartResumesAndEvaluates) {
   EXPECT_EQ(last_metrics(run_dir)["env_steps"].get<std::int64_t>(), budget);
   EXPECT_EQ(last_metrics(run_dir)["learner_epoch"].get<std::int64_t>(), 2);
 
-  // Evaluation of the newest checkpoint: one episode on the straight route, one CSV row.
+  // Evaluation of the newest checkpoint: one episode on the straight route, one CSV row (a
+  // short step budget: the route at 20 m/s).
   ASSERT_EQ(run(command(run_dir, {"--evaluate-episodes", "1", "--route", "straight", "--set",
-                                  "eval.densities=5", "--set", "env.time_limit_steps=60"}),
+                                  "eval.densities=5", "--set", "eval.budget_speed_mps=20"}),
                 dir.path() / "eval.log"),
             0)
       << testing::slurp(dir.path() / "eval.log");
