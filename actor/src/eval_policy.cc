@@ -67,7 +67,10 @@ class SnapshotPolicy final : public EpisodePolicy {
       : policy_(config) {
     policy_.load_snapshot(blob);
   }
-  void begin(const env::Env&, const EpisodeSpec&) override { state_ = {}; }
+  void begin(const env::Env&, const EpisodeSpec& spec) override {
+    state_ = {};
+    policy_.reseed(spec.policy_seed);
+  }
   int act(const env::Env&, const env::StepResult& result) override {
     return policy_.act_eval(
         std::span<const std::uint8_t>(result.observation.data, result.observation.total()),

@@ -390,6 +390,7 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
       video->add(env, step);
     }
     agent::PolicyState state;
+    policy.reseed(spec.policy_seed);
     double episode_return = 0.0;
     while (!step.is_last && step.step < budget && !stop.load()) {
       const int action = random

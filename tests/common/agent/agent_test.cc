@@ -239,7 +239,10 @@ TEST(Policy, ActsWithTheActorOfItsPhase) {
   nn::set_threads(1);
   Agent agent(tiny_config(Phase::kFinetune));
   EXPECT_EQ(agent.acting_actor_group(), "task_actor");
-  Policy task_policy(tiny_config(Phase::kFinetune));
+  EXPECT_TRUE(agent.config().eval_sample);  // DreamerV3 evaluates with sampled actions
+  AgentConfig mode_config = tiny_config(Phase::kFinetune);
+  mode_config.eval_sample = false;
+  Policy task_policy(mode_config);
   task_policy.load_snapshot(agent.snapshot());
   // A pretraining policy expects the exploration actor and refuses a task snapshot.
   Policy expl_policy(tiny_config(Phase::kPretrain));

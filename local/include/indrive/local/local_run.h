@@ -80,8 +80,9 @@ struct EvaluationSummary {
   double mean_steps = 0.0;
 };
 
-// Evaluates the acting policy of the run's newest checkpoint (mode actions, or samples when
-// agent.eval_sample is set; random actions when local.random is set) on `route` of env.town:
+// Evaluates the acting policy of the run's newest checkpoint (sampled actions, or the most
+// likely ones with agent.eval_sample=false; random actions when local.random is set) on `route`
+// of env.town:
 // `episodes` episodes per density of eval.densities with the protocol's traffic and spawn seeds
 // (actor/protocol.h). An episode succeeds when it reaches the route's destination without a
 // failure event. Appends one row per episode to <run>/eval/local-<town>-<route>.csv, and records

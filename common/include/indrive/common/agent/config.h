@@ -128,7 +128,9 @@ struct AgentConfig {
   IntrinsicConfig intrinsic;
   BehaviorConfig behavior;
   ReplayConfig replay;
-  bool eval_sample = false;  // evaluation acts by the mode unless this is set
+  // Evaluation samples from the actor, as DreamerV3 evaluates (its policy in eval mode samples
+  // the task actor); false takes the most likely action.
+  bool eval_sample = true;
   std::uint64_t seed = 0;
 };
 

@@ -40,10 +40,13 @@ class Policy {
   // episode (state and previous action are reset). With sample false the most likely action
   // is taken. Resets the calling thread's graph: call it between training steps, not inside.
   int act(std::span<const std::uint8_t> frame, bool is_first, PolicyState& state, bool sample);
-  // Evaluation acting: the most likely action, or a sample when config.eval_sample is set.
+  // Evaluation acting: a sample (config.eval_sample, the default) or the most likely action.
   int act_eval(std::span<const std::uint8_t> frame, bool is_first, PolicyState& state) {
     return act(frame, is_first, state, config_.eval_sample);
   }
+  // Restarts the generator behind sampled latents and actions: an evaluation episode seeded
+  // by its spec acts the same whatever ran before it (or on which evaluator).
+  void reseed(std::uint64_t seed) { rng_ = nn::Rng(seed ^ 0x9e3779b97f4a7c15ull); }
   // Action probabilities of the last act() call (9 values).
   const std::vector<float>& last_probs() const { return last_probs_; }
   std::uint64_t loaded_snapshots() const { return loaded_; }
