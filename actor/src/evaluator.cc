@@ -1,5 +1,6 @@
 #include "indrive/actor/evaluator.h"
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
 #include <cstdio>
@@ -148,10 +149,12 @@ struct Evaluator::Impl {
           [this](const msg::SnapshotAnnounce& announce) { inbox->announce(announce); });
       heartbeat_reader =
           participant->make_reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
-            if (heartbeat.role() == msg::ROLE_LEARNER && heartbeat.state() == "done" &&
-                dds::validate(heartbeat, config.run_id()) == dds::DropReason::kOk) {
-              learner_done.store(heartbeat.policy_version());
+            if (heartbeat.role() != msg::ROLE_LEARNER ||
+                dds::validate(heartbeat, config.run_id()) != dds::DropReason::kOk) {
+              return;
             }
+            last_learner_beat.store(Clock::now().time_since_epoch().count());
+            if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
           });
     }
     env::EnvConfig env_config = service.env();
@@ -179,8 +182,33 @@ struct Evaluator::Impl {
     request_writer->write(request);
   }
 
+  // The version the learner declared its last, by its reliable final announce or its
+  // heartbeat (0: not yet).
+  std::uint64_t final_version() const {
+    return std::max(learner_done.load(), inbox ? inbox->final_version() : 0);
+  }
+
+  // True when the learner has not been heard from for eval.learner_silence_s since `since` (the
+  // later of the two counts): it died, or it ended without its final announce reaching us.
+  bool learner_silent(Clock::time_point since) const {
+    const double limit_s = config.config().get<double>("eval.learner_silence_s");
+    if (limit_s <= 0.0) return false;
+    const Clock::time_point beat{Clock::duration(last_learner_beat.load())};
+    return std::chrono::duration<double>(Clock::now() - std::max(since, beat)).count() > limit_s;
+  }
+
+  void warn_silent_learner(std::uint64_t version) const {
+    INDRIVE_LOG(kWarn, "evaluator")
+        << "the learner of run '" << config.run_id() << "' has been silent for more than "
+        << config.config().get<double>("eval.learner_silence_s")
+        << " s without announcing its final snapshot; evaluating snapshot v" << version
+        << ", the newest received, which may not be the run's last (policy_version in the "
+           "results says which; eval.learner_silence_s sets the wait, 0 waits for the learner)";
+  }
+
   // The snapshot to evaluate: newer than `after`, and the learner's final one when asked to
-  // wait for it. nullptr when stopped or timed out.
+  // wait for it (or the newest held once the learner has gone silent). nullptr when stopped or
+  // timed out.
   std::shared_ptr<const msg::PolicySnapshot> wait_for_snapshot(const std::atomic<bool>& stop,
                                                                std::uint64_t after,
                                                                bool wait_for_done,
@@ -189,9 +217,12 @@ struct Evaluator::Impl {
     while (!stop.load() &&
            std::chrono::duration<double>(Clock::now() - start).count() < timeout_s) {
       auto snapshot = inbox->take_newer_than(after);
-      const std::uint64_t final_version = learner_done.load();
-      if (snapshot != nullptr &&
-          (!wait_for_done || (final_version > 0 && snapshot->version() >= final_version))) {
+      const std::uint64_t last = final_version();
+      if (snapshot != nullptr && (!wait_for_done || (last > 0 && snapshot->version() >= last))) {
+        return snapshot;
+      }
+      if (snapshot != nullptr && learner_silent(start)) {
+        warn_silent_learner(snapshot->version());
         return snapshot;
       }
       if (inbox->should_request(snapshot ? snapshot->version() : after, Clock::now())) {
@@ -336,20 +367,28 @@ struct Evaluator::Impl {
     std::uint64_t evaluated = 0;
     int evaluations = 0;
     while (!stop.load()) {
-      const std::uint64_t final_version = learner_done.load();
-      if (final_version > 0 && evaluated >= final_version) break;
+      const std::uint64_t last = final_version();
+      if (last > 0 && evaluated >= last) break;
       // The next snapshot at least every_k versions on, or the final one, whichever comes.
       std::shared_ptr<const msg::PolicySnapshot> next;
       const auto start = Clock::now();
       while (!stop.load() && next == nullptr) {
         auto newest = inbox->take_newer_than(evaluated);
-        const std::uint64_t done_version = learner_done.load();
+        const std::uint64_t done_version = final_version();
         if (newest != nullptr && (evaluated == 0 || newest->version() >= evaluated + every_k ||
                                   (done_version > 0 && newest->version() >= done_version))) {
           next = newest;
           break;
         }
         if (done_version > 0 && evaluated >= done_version) break;
+        if (evaluated > 0 && learner_silent(start)) {
+          // The curve ends with the newest snapshot held, evaluated once.
+          if (newest != nullptr) {
+            warn_silent_learner(newest->version());
+            next = newest;
+          }
+          break;
+        }
         if (inbox->should_request(newest ? newest->version() : evaluated, Clock::now())) {
           request_snapshot();
         }
@@ -391,6 +430,8 @@ struct Evaluator::Impl {
   std::unique_ptr<EpisodePolicy> policy;
   std::unique_ptr<SnapshotInbox> inbox;
   std::atomic<std::uint64_t> learner_done{0};
+  // When the learner's last heartbeat arrived (steady clock ticks; 0: never).
+  std::atomic<Clock::rep> last_learner_beat{0};
   std::unique_ptr<dds::Participant> participant;
   std::unique_ptr<dds::Writer<msg::EpisodeResult>> result_writer;
   std::unique_ptr<dds::Writer<msg::SnapshotRequest>> request_writer;

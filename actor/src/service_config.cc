@@ -112,6 +112,10 @@ void declare_service_schema(config::Schema& schema) {
       .add_bool("eval.wait_for_done", true,
                 "evaluate the learner's last snapshot (wait until it reports done)")
       .add_float("eval.snapshot_timeout_s", 3600.0, "give up when no snapshot comes in time", 1.0)
+      .add_float("eval.learner_silence_s", 120.0,
+                 "with wait_for_done: evaluate the newest snapshot held, with a warning, once "
+                 "the learner has not been heard from for this long (0: wait for it)",
+                 0.0)
       .add_choice("eval.kind", "zero_shot", {"zero_shot", "few_shot"},
                   "evaluation kind written to the results")
       .add_choice("eval.policy", "snapshot", {"snapshot", "oracle", "random"},

@@ -1,5 +1,7 @@
 #include "indrive/actor/snapshot_inbox.h"
 
+#include <algorithm>
+
 #include "indrive/common/log.h"
 
 namespace indrive::actor {
@@ -42,6 +44,7 @@ void SnapshotInbox::announce(const msg::SnapshotAnnounce& announce) {
     announced_ = announce.version();
     announced_since_ = Clock::now();
   }
+  if (announce.learner_done()) final_ = std::max(final_, announce.version());
 }
 
 std::shared_ptr<const msg::PolicySnapshot> SnapshotInbox::take_newer_than(std::uint64_t version) {
@@ -68,6 +71,11 @@ std::uint64_t SnapshotInbox::architecture_rejects() const {
 std::uint64_t SnapshotInbox::announced_version() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return announced_;
+}
+
+std::uint64_t SnapshotInbox::final_version() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return final_;
 }
 
 }  // namespace indrive::actor

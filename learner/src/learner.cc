@@ -410,9 +410,22 @@ struct Learner::Impl {
     announce.version(newest_snapshot->version());
     announce.checksum(newest_snapshot->checksum());
     announce.size_bytes(newest_snapshot->params().size());
+    announce.learner_done(done);
     dds::seal(announce);
     announce_writer->write(announce);
     last_announce = Clock::now();
+  }
+
+  // Tells evaluators reliably which snapshot is the run's last: the heartbeat's "done" is best
+  // effort and can be lost as the process exits, which left an evaluator waiting for it. The
+  // announce is reliable and the learner waits (bounded) until every matched reader has it.
+  void announce_final_snapshot() {
+    if (!newest_snapshot) return;
+    publish_announce();
+    if (!announce_writer->wait_for_acknowledgments(std::chrono::seconds(5))) {
+      INDRIVE_LOG(kWarn, "learner") << "not every reader acknowledged the final announce of v"
+                                    << newest_snapshot->version() << " within 5 s";
+    }
   }
 
   std::uint64_t allowance() const {
@@ -576,6 +589,7 @@ struct Learner::Impl {
     last_log = Clock::now() - std::chrono::hours(1);
     log_metrics();
     publish_pacing(true);
+    if (done) announce_final_snapshot();
     INDRIVE_LOG(kInfo, "learner") << (done ? "budget reached" : "stopped") << ": "
                                   << stats.counters.env_steps << " env steps, "
                                   << stats.counters.updates << " updates, policy v"

@@ -6,8 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <thread>
 
@@ -215,6 +217,7 @@ struct StandInLearner {
         participant(dds::ParticipantOptions{.domain_id = config.domain_id(),
                                             .profiles_file = config.dds_profile()}),
         snapshots(participant.make_writer<msg::PolicySnapshot>()),
+        announces(participant.make_writer<msg::SnapshotAnnounce>()),
         heartbeats(participant.make_writer<msg::Heartbeat>()) {}
 
   void publish(std::uint64_t version) {
@@ -229,6 +232,7 @@ struct StandInLearner {
     snapshot.params(agent.snapshot());
     dds::seal(snapshot);
     snapshots->write(snapshot);
+    published = snapshot;
   }
   void beat(bool done, std::uint64_t version) {
     msg::Heartbeat heartbeat;
@@ -240,13 +244,42 @@ struct StandInLearner {
     heartbeats->write(heartbeat);
   }
 
+  // Announces the newest published snapshot.
+  void announce(bool learner_done) {
+    msg::SnapshotAnnounce announce = dds::announce_for(published);
+    announce.learner_done(learner_done);
+    dds::seal(announce);
+    announces->write(announce);
+  }
+
   const ServiceConfig& config;
   agent::AgentConfig agent_config;
   agent::Agent agent;
   dds::Participant participant;
   std::unique_ptr<dds::Writer<msg::PolicySnapshot>> snapshots;
+  std::unique_ptr<dds::Writer<msg::SnapshotAnnounce>> announces;
   std::unique_ptr<dds::Writer<msg::Heartbeat>> heartbeats;
+  msg::PolicySnapshot published;
 };
+
+// Runs one evaluator on `config` in a thread while `drive` plays the learner; returns the
+// evaluator's exit code (-1 when it was still waiting after `drive` and 120 s more).
+int evaluate_beside(const ServiceConfig& config, const std::function<void()>& drive) {
+  std::atomic<bool> stop{false};
+  std::atomic<int> code{-1};
+  std::thread evaluator_thread([&] {
+    Evaluator evaluator(config, 0, 1);
+    code = evaluator.run(stop);
+  });
+  drive();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (code.load() < 0 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  stop = true;
+  evaluator_thread.join();
+  return code.load();
+}
 
 // The default mode over DDS: the evaluator waits for the learner's final snapshot (v2 is
 // published, but only v3 is announced as done), evaluates it, writes rows tagged with its
@@ -285,6 +318,62 @@ TEST(Evaluator, LearnersFinalSnapshotIsEvaluatedAndKeptAsAFile) {
   const auto kept = dir.path() / "dds-run/eval/snapshot-v3.params";
   EXPECT_EQ(read_snapshot_file(kept), learner.agent.snapshot());
   EXPECT_FALSE(std::filesystem::exists(dir.path() / "dds-run/eval/snapshot-v2.params"));
+}
+
+// The learner's reliable final announce alone ends the wait: its best-effort "done" heartbeat
+// can be lost as the learner exits, which once left an evaluator waiting for an hour.
+TEST(Evaluator, TheLearnersFinalAnnounceEndsTheWaitWithoutADoneHeartbeat) {
+  testing::TempDir dir;
+  const auto config =
+      resolve(dir.path() / "announce-run",
+              {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
+               "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60", "eval.learner_silence_s=0",
+               "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  StandInLearner learner(config);
+  const int code = evaluate_beside(config, [&] {
+    // Announces are volatile, as they are from a learner that has long been matched.
+    ASSERT_TRUE(learner.announces->wait_for_matched(1, std::chrono::seconds(30)));
+    ASSERT_TRUE(learner.snapshots->wait_for_matched(1, std::chrono::seconds(30)));
+    learner.publish(2);
+    learner.publish(3);
+    for (int i = 0; i < 10; ++i) {  // announced, not final: v3 must not be taken yet
+      learner.beat(false, 3);
+      learner.announce(false);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    learner.announce(true);
+    learner.announces->wait_for_acknowledgments(std::chrono::seconds(5));
+  });
+  ASSERT_EQ(code, 0);
+  const auto rows = read_episode_csv(dir.path() / "announce-run/eval/evaluator-0.csv");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].policy_version, 3);
+}
+
+// A learner that falls silent without declaring its last snapshot (it died, and nothing
+// restarted it) leaves the newest snapshot held to be evaluated after eval.learner_silence_s,
+// rather than an evaluator waiting until eval.snapshot_timeout_s.
+TEST(Evaluator, ASilentLearnersNewestSnapshotIsEvaluatedAfterTheSilenceLimit) {
+  testing::TempDir dir;
+  const auto config =
+      resolve(dir.path() / "silent-run",
+              {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
+               "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60", "eval.learner_silence_s=1",
+               "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  StandInLearner learner(config);
+  const int code = evaluate_beside(config, [&] {
+    learner.publish(4);
+    for (int i = 0; i < 20; ++i) {  // 1 s of "running", longer than the limit: not yet taken
+      learner.beat(false, 4);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir.path() / "silent-run/eval/snapshot-v4.params"))
+        << "a learner still beating is waited for";
+  });
+  ASSERT_EQ(code, 0);
+  const auto rows = read_episode_csv(dir.path() / "silent-run/eval/evaluator-0.csv");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].policy_version, 4);
 }
 
 // Continuous mode against a stand-in learner: snapshots v1..v5 with every_k = 2 give curve

@@ -18,9 +18,11 @@ msg::PolicySnapshot snapshot(std::uint64_t version, const std::string& run = "ru
   return s;
 }
 
-msg::SnapshotAnnounce announce(std::uint64_t version) {
+msg::SnapshotAnnounce announce(std::uint64_t version, bool learner_done = false,
+                               const std::string& run = "run-a") {
   msg::SnapshotAnnounce a;
-  a.run_id("run-a");
+  a.run_id(run);
+  a.learner_done(learner_done);
   a.version(version);
   a.checksum(1);
   a.size_bytes(100);
@@ -68,6 +70,17 @@ TEST(SnapshotInboxTest, ReRequestsAnAnnouncedSnapshotThatDidNotArrive) {
   inbox.offer(snapshot(4));
   EXPECT_FALSE(inbox.should_request(0, later + std::chrono::seconds(5))) << "it arrived";
   EXPECT_FALSE(inbox.should_request(4, later + std::chrono::seconds(5)));
+}
+
+TEST(SnapshotInboxTest, TheLearnersFinalAnnounceNamesTheLastVersion) {
+  SnapshotInbox inbox("run-a", "arch-1", 1.0);
+  inbox.announce(announce(3));
+  EXPECT_EQ(inbox.final_version(), 0u) << "a periodic announce is not the last";
+  inbox.announce(announce(5, true, "run-b"));
+  EXPECT_EQ(inbox.final_version(), 0u) << "another run's final announce is ignored";
+  inbox.announce(announce(4, true));
+  EXPECT_EQ(inbox.final_version(), 4u);
+  EXPECT_EQ(inbox.announced_version(), 4u);
 }
 
 }  // namespace

@@ -83,12 +83,15 @@ learner:
             testing::source_path("deploy/dds/single_host.xml").string()};
   }
 
-  std::unique_ptr<Child> start_learner() {
-    return std::make_unique<Child>(args("indrive-learner"), dir_.path() / "learner.log");
+  std::unique_ptr<Child> start_learner(const std::vector<std::string>& extra = {}) {
+    auto argv = args("indrive-learner");
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return std::make_unique<Child>(argv, dir_.path() / "learner.log");
   }
-  std::unique_ptr<Child> start_actor(int id) {
+  std::unique_ptr<Child> start_actor(int id, const std::vector<std::string>& extra = {}) {
     auto argv = args("indrive-actor");
     argv.insert(argv.end(), {"--id", std::to_string(id)});
+    argv.insert(argv.end(), extra.begin(), extra.end());
     return std::make_unique<Child>(argv, dir_.path() / ("actor-" + std::to_string(id) + ".log"));
   }
 
@@ -231,6 +234,49 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
   actor1->signal(SIGTERM);
   EXPECT_EQ(actor0->wait(30s), 0) << logs();
   EXPECT_EQ(actor1->wait(30s), 0) << logs();
+}
+
+// A learner that spends its budget declares its last snapshot in a reliable announce before it
+// exits (its "done" heartbeat is best effort), so evaluators waiting for it are never left
+// hanging. Only that announce says learner_done, and it names the newest snapshot.
+TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExiting) {
+  dds::Participant participant(
+      {.domain_id = domain_,
+       .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()});
+  std::mutex mutex;
+  std::uint64_t newest_snapshot = 0, final_announced = 0, done_announces = 0, announces = 0;
+  bool announced_done_early = false;
+  auto snapshot_reader =
+      participant.make_reader<msg::PolicySnapshot>([&](const msg::PolicySnapshot& snapshot) {
+        std::lock_guard<std::mutex> lock(mutex);
+        newest_snapshot = std::max(newest_snapshot, snapshot.version());
+      });
+  auto announce_reader =
+      participant.make_reader<msg::SnapshotAnnounce>([&](const msg::SnapshotAnnounce& announce) {
+        std::lock_guard<std::mutex> lock(mutex);
+        ++announces;
+        if (!announce.learner_done()) {
+          announced_done_early = announced_done_early || done_announces > 0;
+          return;
+        }
+        ++done_announces;
+        final_announced = announce.version();
+      });
+  const std::vector<std::string> budget = {"--set", "run.budget_env_steps=400"};
+  auto learner = start_learner(budget);
+  auto actor = start_actor(0, budget);
+  ASSERT_EQ(learner->wait(150s), 0) << logs();
+  actor->signal(SIGTERM);
+  EXPECT_EQ(actor->wait(30s), 0) << logs();
+
+  const auto metrics = last_metrics();
+  std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_GT(announces, 1u) << "periodic announces came before the final one";
+  EXPECT_GE(done_announces, 1u) << logs();
+  EXPECT_FALSE(announced_done_early) << "no periodic announce after the final one";
+  EXPECT_GT(final_announced, 0u);
+  EXPECT_EQ(final_announced, newest_snapshot);
+  EXPECT_EQ(final_announced, metrics.value("policy_version", 0u)) << metrics.dump();
 }
 
 }  // namespace

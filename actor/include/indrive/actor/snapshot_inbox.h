@@ -46,6 +46,8 @@ class SnapshotInbox {
   std::uint64_t architecture_rejects() const;
   // Newest version announced by the learner (0: none yet).
   std::uint64_t announced_version() const;
+  // The version the learner announced as its last when it spent its budget (0: not yet).
+  std::uint64_t final_version() const;
 
  private:
   std::string run_id_;
@@ -54,6 +56,7 @@ class SnapshotInbox {
   mutable std::mutex mutex_;
   std::shared_ptr<const msg::PolicySnapshot> newest_;
   std::uint64_t announced_ = 0;
+  std::uint64_t final_ = 0;
   Clock::time_point announced_since_{};
   Clock::time_point last_request_{};
   std::uint64_t architecture_rejects_ = 0;
