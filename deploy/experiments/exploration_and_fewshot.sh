@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The two claims of the method on one host, with indrive-train-local (one process per run):
 #   1. exploration: coverage of a random policy vs disag pretraining over the same env steps
-#      (distinct 10 m lane segments per 1,000 env steps, and the fraction of the town's
-#      segments ever visited; see envserver/include/indrive/envserver/coverage.h);
+#      (distinct 10 m lane segments per 1,000 env steps, the fraction of the town's segments
+#      ever visited, and the segments one episode reaches from its spawn point by driving; see
+#      envserver/include/indrive/envserver/coverage.h);
 #   2. few-shot transfer: lane following on the straight route, finetuned from the disag
 #      pretraining vs DreamerV3 from scratch with the same task budget, scored by the success
 #      rate over a fixed number of evaluation episodes (sampled actions, the protocol's traffic and
@@ -119,7 +120,7 @@ say "6/6 plots (learning curves and coverage maps)"
 for run in random disag finetune-lf dreamer-lf; do
   "$bin/indrive" plot "$out/$run" > /dev/null || echo "(no plots for $run)"
 done
-for metric in coverage_fraction_visited coverage_distinct_per_1k; do
+for metric in coverage_fraction_visited coverage_distinct_per_1k episode_reach_last20; do
   "$bin/indrive" compare "$out/random" "$out/disag" --metric "$metric" \
     --out "$out/compare-$metric.png" > /dev/null
 done
@@ -136,6 +137,13 @@ sr() { sed -n 's/^evaluation [^ ]* [^ ]*: //p' "$out/$1/evaluation.txt"; }
   printf '  %-40s %12s %12s\n' "% of the town's segments visited" \
     "$(last_metric "$out/random" coverage_fraction_visited 100)" \
     "$(last_metric "$out/disag" coverage_fraction_visited 100)"
+  printf '  %-40s %12s %12s\n' "lane segments reached per episode (*)" \
+    "$(last_metric "$out/random" episode_reach_last20)" \
+    "$(last_metric "$out/disag" episode_reach_last20)"
+  printf '  %-40s %12s %12s\n' "env steps per episode (*)" \
+    "$(last_metric "$out/random" episode_length_last20)" \
+    "$(last_metric "$out/disag" episode_length_last20)"
+  echo "  (*) mean over the last 20 episodes of the run"
   echo
   echo "lane following on $route, $task_steps task env steps, $eval_episodes episode(s) per density [$eval_densities]"
   printf '  %-34s %s\n' "finetune from disag pretraining" "$(sr finetune-lf)"

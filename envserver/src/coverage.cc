@@ -61,7 +61,8 @@ CoverageTracker::CoverageTracker(const RoadNetwork& net, CoverageOptions options
     : segments_(net, options.segment_m),
       options_(options),
       visits_(segments_.count(), 0),
-      last_window_(segments_.count(), -1) {
+      last_window_(segments_.count(), -1),
+      last_episode_(segments_.count(), -1) {
   if (options.window_steps < 1) {
     throw std::invalid_argument("coverage window must hold at least one step");
   }
@@ -75,13 +76,27 @@ void CoverageTracker::observe(const Pose2& pose) {
       last_window_[*piece] = window;
       ++current_distinct_;
     }
+    if (last_episode_[*piece] != episode_) {
+      last_episode_[*piece] = episode_;
+      ++episode_distinct_;
+    }
   }
+  ++episode_step_count_;
   ++steps_;
   ++session_steps_;
   if (session_steps_ % options_.window_steps == 0) {
     window_scores_.push_back(current_distinct_);
     current_distinct_ = 0;
   }
+}
+
+void CoverageTracker::end_episode() {
+  if (episode_step_count_ == 0) return;
+  episode_reach_.push_back(episode_distinct_);
+  episode_steps_.push_back(episode_step_count_);
+  episode_distinct_ = 0;
+  episode_step_count_ = 0;
+  ++episode_;
 }
 
 double CoverageTracker::distinct_per_window() const {

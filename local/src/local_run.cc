@@ -127,7 +127,10 @@ struct LocalRun::Impl {
         town(env::load_town(service.env().town, service.env().town_options)),
         coverage(town.net, {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
         environment(service,
-                    [this](const env::StepResult& result) { coverage.observe(result.ego.pose); }),
+                    [this](const env::StepResult& result) {
+                      if (result.is_first) coverage.end_episode();
+                      coverage.observe(result.ego.pose);
+                    }),
         trainer(agent_config, environment,
                 {.train_ratio = service.config().get<double>("learner.replay_ratio"),
                  .snapshot_every = service.config().get<int>("learner.snapshot_every")}),
@@ -236,6 +239,7 @@ struct LocalRun::Impl {
         {"coverage_fraction_visited", coverage.fraction_visited()},
         {"coverage_segments_visited", coverage.segments_visited()}};
     if (counters.episodes > logged_episodes) record["episode_return"] = counters.episode_return;
+    add_episode_reach(record);
     // Training metrics as means over the interval's updates (the learner logs its last update;
     // a mean is steadier for the few updates of a local run).
     for (const auto& [name, sum_count] : interval_sums) {
@@ -259,6 +263,28 @@ struct LocalRun::Impl {
     logged_steps = env_steps();
     logged_updates = updates();
     logged_episodes = counters.episodes;
+  }
+
+  // Episode length and reach (distinct lane pieces per episode, see coverage.h): means over the
+  // episodes that ended in this interval, and over the last 20 (steadier for comparing runs).
+  void add_episode_reach(nlohmann::json& record) {
+    const auto& reach = coverage.episode_reach();
+    const auto& steps = coverage.episode_steps();
+    const auto mean = [&](const std::vector<int>& values, std::size_t from) {
+      double sum = 0.0;
+      for (std::size_t i = from; i < values.size(); ++i) sum += values[i];
+      return sum / static_cast<double>(values.size() - from);
+    };
+    if (reach.size() > logged_reach) {
+      record["episode_reach"] = mean(reach, logged_reach);
+      record["episode_length"] = mean(steps, logged_reach);
+    }
+    if (!reach.empty()) {
+      const std::size_t from = reach.size() > 20 ? reach.size() - 20 : 0;
+      record["episode_reach_last20"] = mean(reach, from);
+      record["episode_length_last20"] = mean(steps, from);
+    }
+    logged_reach = reach.size();
   }
 
   void train(const std::atomic<bool>& stop) {
@@ -311,6 +337,7 @@ struct LocalRun::Impl {
   std::function<void(const std::string&)> progress;
   Clock::time_point last_log{}, last_checkpoint{};
   std::int64_t logged_steps = 0, logged_updates = 0, logged_episodes = 0;
+  std::size_t logged_reach = 0;  // episodes of coverage.episode_reach() already logged
 };
 
 LocalRun::LocalRun(const actor::ServiceConfig& config) : impl_(std::make_unique<Impl>(config)) {}

@@ -103,6 +103,31 @@ TEST(CoverageTrackerTest, CountsDistinctPiecesPerWindow) {
   EXPECT_DOUBLE_EQ(coverage.fraction_visited(), 3.0 / segments.count());
 }
 
+TEST(CoverageTrackerTest, ReachCountsTheDistinctPiecesOfEachEpisode) {
+  const RoadNetwork& net = town02().net;
+  CoverageTracker coverage(net, {.segment_m = 10.0, .window_steps = 1000});
+  const int lane = long_lane(35.0);
+  const Pose2 a = net.lane_pose(lane, 2.0);
+  const Pose2 a2 = net.lane_pose(lane, 8.0);  // same piece as a
+  const Pose2 b = net.lane_pose(lane, 12.0);
+  const Pose2 c = net.lane_pose(lane, 31.0);
+  const Pose2 off{net.max_corner().x() + 500.0, net.max_corner().y() + 500.0, 0.0};
+  coverage.end_episode();  // nothing observed yet: no episode
+  EXPECT_TRUE(coverage.episode_reach().empty());
+  // Episode 1 drives a -> b -> c (3 pieces in 5 steps, one off the road).
+  for (const Pose2& p : {a, a2, b, off, c}) coverage.observe(p);
+  coverage.end_episode();
+  // Episode 2 is spawned on b again and ends there: 1 piece, although b was seen before.
+  for (const Pose2& p : {b, b}) coverage.observe(p);
+  coverage.end_episode();
+  coverage.end_episode();  // twice in a row: still two episodes
+  EXPECT_EQ(coverage.episode_reach(), (std::vector<int>{3, 1}));
+  EXPECT_EQ(coverage.episode_steps(), (std::vector<int>{5, 2}));
+  // The episode in progress is not counted until it ends.
+  coverage.observe(c);
+  EXPECT_EQ(coverage.episode_reach().size(), 2u);
+}
+
 TEST(CoverageTrackerTest, PartialWindowIsScaledToTheWindowLength) {
   const RoadNetwork& net = town02().net;
   CoverageTracker coverage(net, {.segment_m = 10.0, .window_steps = 1000});

@@ -256,6 +256,26 @@ TEST(LocalRunTest, ARunLogsAMetricsLineEveryLogStepsEvenWhenFast) {
     EXPECT_LT(steps[k], 200 * (k + 1) + 16);
   }
   EXPECT_EQ(steps[3], 700);
+
+  // Reach per episode (coverage.h): every closed episode visits at least its spawn piece and
+  // no more pieces than it took steps; the last line's mean over the last 20 matches them.
+  const auto& reach = run.coverage().episode_reach();
+  const auto& lengths = run.coverage().episode_steps();
+  ASSERT_GE(reach.size(), 2u) << "a random policy ends episodes within 700 steps";
+  ASSERT_EQ(reach.size(), lengths.size());
+  int total = 0;
+  for (std::size_t i = 0; i < reach.size(); ++i) {
+    EXPECT_GE(reach[i], 1) << "episode " << i;
+    EXPECT_LE(reach[i], lengths[i]) << "episode " << i;
+    total += lengths[i];
+  }
+  EXPECT_LE(total, 700);
+  const std::size_t from = reach.size() > 20 ? reach.size() - 20 : 0;
+  double mean = 0.0;
+  for (std::size_t i = from; i < reach.size(); ++i) mean += reach[i];
+  mean /= static_cast<double>(reach.size() - from);
+  const auto last = read_metrics(dir.path() / "random").back();
+  EXPECT_NEAR(last.value("episode_reach_last20", -1.0), mean, 1e-9) << last.dump();
 }
 
 // One column of a CSV file with a header row, by name (cells hold no commas here).
@@ -326,7 +346,9 @@ TEST(LocalRunTest, EvaluationEndsEpisodesAtTheRouteBudgetNotTheEnvTimeLimit) {
   for (std::size_t i = 0; i < steps.size(); ++i) {
     EXPECT_GT(std::stoi(steps[i]), 10) << "episode " << i << " ended by " << reasons[i];
     EXPECT_LE(std::stoi(steps[i]), 152) << "episode " << i;
-    if (reasons[i] == "time_limit") EXPECT_EQ(std::stoi(steps[i]), 152) << "episode " << i;
+    if (reasons[i] == "time_limit") {
+      EXPECT_EQ(std::stoi(steps[i]), 152) << "episode " << i;
+    }
   }
 }
 

@@ -15,6 +15,12 @@
 //     policy that drives the same loop over and over scores the loop's pieces, one that keeps
 //     reaching new streets scores the most.
 //   - fraction visited: pieces visited at least once over all steps / all pieces of the town.
+// Both count pieces reached by driving and pieces reached by being spawned there alike. A
+// third measure tells them apart:
+//   - reach per episode: the distinct pieces one episode visits, from its spawn piece to where
+//     it ends. A policy that ends its episodes within metres (off the road, into a car) reaches
+//     a handful; one that keeps driving into streets it has not seen reaches many. Episodes are
+//     delimited by end_episode(); this session's episodes only (not restored).
 //
 //   CoverageTracker coverage(town.net);
 //   for each env step: coverage.observe(result.ego.pose);
@@ -91,6 +97,9 @@ class CoverageTracker {
 
   // Records one env step at `pose` (the ego's footprint centre and heading).
   void observe(const Pose2& pose);
+  // Closes the episode in progress (the steps observed since the last call), if it has steps:
+  // its distinct pieces and steps join episode_reach() and episode_steps().
+  void end_episode();
   // Continues from earlier counts (a resumed run's coverage file): their visits, steps and
   // completed windows join this tracker's; new windows start at the next observed step.
   void restore(const CoverageCounts& counts);
@@ -104,6 +113,9 @@ class CoverageTracker {
   // The distinct-segments-per-window measure defined at the top of this file (0 before the
   // first step).
   double distinct_per_window() const;
+  // Distinct pieces and steps of each closed episode, oldest first.
+  const std::vector<int>& episode_reach() const { return episode_reach_; }
+  const std::vector<int>& episode_steps() const { return episode_steps_; }
   // Pieces visited at least once.
   int segments_visited() const;
   // segments_visited() / all pieces of the town.
@@ -127,7 +139,13 @@ class CoverageTracker {
   std::int64_t session_steps_ = 0;  // steps observed here (window boundaries count from 0)
   std::int64_t restored_windows_ = 0;
   double restored_window_sum_ = 0.0;
-  double restored_partial_ = 0.0;  // measure of restored counts without a complete window
+  double restored_partial_ = 0.0;           // measure of restored counts without a complete window
+  std::vector<std::int64_t> last_episode_;  // per piece: the last episode that visited it
+  std::int64_t episode_ = 0;                // index of the episode in progress
+  int episode_distinct_ = 0;
+  int episode_step_count_ = 0;
+  std::vector<int> episode_reach_;
+  std::vector<int> episode_steps_;
 };
 
 // Reads and merges coverage CSV files (visits of the same piece add up). Throws IoError when a
