@@ -386,6 +386,12 @@ struct Evaluator::Impl {
           if (newest != nullptr) {
             warn_silent_learner(newest->version());
             next = newest;
+          } else {
+            INDRIVE_LOG(kWarn, "evaluator")
+                << "the learner of run '" << config.run_id() << "' has been silent for more than "
+                << config.config().get<double>("eval.learner_silence_s")
+                << " s without announcing its final snapshot; the learning curve ends at v"
+                << evaluated;
           }
           break;
         }
