@@ -107,7 +107,9 @@ TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
     EXPECT_EQ(row.traffic_seed, kTrafficSeeds[spec.episode % 3]);
     EXPECT_EQ(row.spawn_seed, kSpawnSeeds[spec.episode % 5]);
     // The two episodes of a cell meet different traffic.
-    if (spec.episode == 1) EXPECT_NE(row.traffic_seed, rows[i - 1].traffic_seed);
+    if (spec.episode == 1) {
+      EXPECT_NE(row.traffic_seed, rows[i - 1].traffic_seed);
+    }
 
     // The episode replayed independently ends the same way.
     const Replay r = replay(env, spec, is_oracle ? *oracle : *random);
@@ -118,7 +120,9 @@ TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
     EXPECT_EQ(row.steps, r.steps);
     EXPECT_NEAR(row.route_completion, std::min(1.0, r.progress_m / r.length_m), 1e-6);
     EXPECT_LE(row.steps, route_step_budget(r.length_m));
-    if (row.success) EXPECT_GT(row.route_completion, 0.95);
+    if (row.success) {
+      EXPECT_GT(row.route_completion, 0.95);
+    }
     EXPECT_EQ(row.episode_return, 0.0);  // no reward in zero-shot evaluation
 
     auto& cell = by_hand[row.method][{row.town, row.route}];
@@ -262,6 +266,23 @@ struct StandInLearner {
   msg::PolicySnapshot published;
 };
 
+// A run evaluated over DDS on a fresh domain: one episode (town02, straight, density 5).
+ServiceConfig one_episode_over_dds(const std::filesystem::path& run_dir,
+                                   std::vector<std::string> overrides) {
+  overrides.insert(overrides.end(),
+                   {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
+                    "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
+                    "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  return resolve(run_dir, std::move(overrides));
+}
+
+// Checks that the run's evaluator wrote one row, for snapshot `version`.
+void expect_one_row_of(const std::filesystem::path& run_dir, long long version) {
+  const auto rows = read_episode_csv(run_dir / "eval/evaluator-0.csv");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].policy_version, version);
+}
+
 // Runs one evaluator on `config` in a thread while `drive` plays the learner; returns the
 // evaluator's exit code (-1 when it was still waiting after `drive` and 120 s more).
 int evaluate_beside(const ServiceConfig& config, const std::function<void()>& drive) {
@@ -286,10 +307,7 @@ int evaluate_beside(const ServiceConfig& config, const std::function<void()>& dr
 // version and keeps it as a snapshot file that evaluates again without DDS.
 TEST(Evaluator, LearnersFinalSnapshotIsEvaluatedAndKeptAsAFile) {
   testing::TempDir dir;
-  const auto config = resolve(dir.path() / "dds-run",
-                              {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
-                               "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
-                               "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  const auto config = one_episode_over_dds(dir.path() / "dds-run", {});
   StandInLearner learner(config);
   std::atomic<bool> stop{false};
   std::atomic<int> code{-1};
@@ -311,10 +329,8 @@ TEST(Evaluator, LearnersFinalSnapshotIsEvaluatedAndKeptAsAFile) {
   stop = true;
   evaluator_thread.join();
   ASSERT_EQ(code.load(), 0);
-  const auto rows = read_episode_csv(dir.path() / "dds-run/eval/evaluator-0.csv");
-  ASSERT_EQ(rows.size(), 1u);
-  EXPECT_EQ(rows[0].policy_version, 3);
-  EXPECT_EQ(rows[0].method, "disag");
+  expect_one_row_of(dir.path() / "dds-run", 3);
+  EXPECT_EQ(read_episode_csv(dir.path() / "dds-run/eval/evaluator-0.csv").at(0).method, "disag");
   const auto kept = dir.path() / "dds-run/eval/snapshot-v3.params";
   EXPECT_EQ(read_snapshot_file(kept), learner.agent.snapshot());
   EXPECT_FALSE(std::filesystem::exists(dir.path() / "dds-run/eval/snapshot-v2.params"));
@@ -325,10 +341,7 @@ TEST(Evaluator, LearnersFinalSnapshotIsEvaluatedAndKeptAsAFile) {
 TEST(Evaluator, TheLearnersFinalAnnounceEndsTheWaitWithoutADoneHeartbeat) {
   testing::TempDir dir;
   const auto config =
-      resolve(dir.path() / "announce-run",
-              {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
-               "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60", "eval.learner_silence_s=0",
-               "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+      one_episode_over_dds(dir.path() / "announce-run", {"eval.learner_silence_s=0"});
   StandInLearner learner(config);
   const int code = evaluate_beside(config, [&] {
     // Announces are volatile, as they are from a learner that has long been matched.
@@ -345,9 +358,7 @@ TEST(Evaluator, TheLearnersFinalAnnounceEndsTheWaitWithoutADoneHeartbeat) {
     learner.announces->wait_for_acknowledgments(std::chrono::seconds(5));
   });
   ASSERT_EQ(code, 0);
-  const auto rows = read_episode_csv(dir.path() / "announce-run/eval/evaluator-0.csv");
-  ASSERT_EQ(rows.size(), 1u);
-  EXPECT_EQ(rows[0].policy_version, 3);
+  expect_one_row_of(dir.path() / "announce-run", 3);
 }
 
 // A learner that falls silent without declaring its last snapshot (it died, and nothing
@@ -355,11 +366,7 @@ TEST(Evaluator, TheLearnersFinalAnnounceEndsTheWaitWithoutADoneHeartbeat) {
 // rather than an evaluator waiting until eval.snapshot_timeout_s.
 TEST(Evaluator, ASilentLearnersNewestSnapshotIsEvaluatedAfterTheSilenceLimit) {
   testing::TempDir dir;
-  const auto config =
-      resolve(dir.path() / "silent-run",
-              {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
-               "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60", "eval.learner_silence_s=1",
-               "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  const auto config = one_episode_over_dds(dir.path() / "silent-run", {"eval.learner_silence_s=1"});
   StandInLearner learner(config);
   const int code = evaluate_beside(config, [&] {
     learner.publish(4);
@@ -371,9 +378,7 @@ TEST(Evaluator, ASilentLearnersNewestSnapshotIsEvaluatedAfterTheSilenceLimit) {
         << "a learner still beating is waited for";
   });
   ASSERT_EQ(code, 0);
-  const auto rows = read_episode_csv(dir.path() / "silent-run/eval/evaluator-0.csv");
-  ASSERT_EQ(rows.size(), 1u);
-  EXPECT_EQ(rows[0].policy_version, 4);
+  expect_one_row_of(dir.path() / "silent-run", 4);
 }
 
 // Continuous mode against a stand-in learner: snapshots v1..v5 with every_k = 2 give curve

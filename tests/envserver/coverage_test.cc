@@ -72,15 +72,25 @@ TEST(LaneSegmentsTest, LocatesPosesOnLanesAndJunctionsAndNotOffRoad) {
   EXPECT_GT(internal_hits, 0);
 }
 
+// Poses on one long lane of town02: a and a2 on its first 10 m piece, b on the second, c on the
+// fourth; off is far outside the town.
+struct LanePoses {
+  explicit LanePoses(const RoadNetwork& net)
+      : lane(long_lane(35.0)),
+        a(net.lane_pose(lane, 2.0)),
+        a2(net.lane_pose(lane, 8.0)),
+        b(net.lane_pose(lane, 12.0)),
+        c(net.lane_pose(lane, 31.0)),
+        off{net.max_corner().x() + 500.0, net.max_corner().y() + 500.0, 0.0} {}
+  int lane;
+  Pose2 a, a2, b, c, off;
+};
+
 TEST(CoverageTrackerTest, CountsDistinctPiecesPerWindow) {
   const RoadNetwork& net = town02().net;
   CoverageTracker coverage(net, {.segment_m = 10.0, .window_steps = 4});
-  const int lane = long_lane(35.0);
-  const Pose2 a = net.lane_pose(lane, 2.0);
-  const Pose2 a2 = net.lane_pose(lane, 8.0);  // same piece as a
-  const Pose2 b = net.lane_pose(lane, 12.0);
-  const Pose2 c = net.lane_pose(lane, 31.0);
-  const Pose2 off{net.max_corner().x() + 500.0, net.max_corner().y() + 500.0, 0.0};
+  const LanePoses poses(net);
+  const auto& [lane, a, a2, b, c, off] = poses;
   EXPECT_EQ(coverage.distinct_per_window(), 0.0);
   // Window 1: a, a2, b, off -> 2 distinct pieces.
   for (const Pose2& p : {a, a2, b, off}) coverage.observe(p);
@@ -106,12 +116,8 @@ TEST(CoverageTrackerTest, CountsDistinctPiecesPerWindow) {
 TEST(CoverageTrackerTest, ReachCountsTheDistinctPiecesOfEachEpisode) {
   const RoadNetwork& net = town02().net;
   CoverageTracker coverage(net, {.segment_m = 10.0, .window_steps = 1000});
-  const int lane = long_lane(35.0);
-  const Pose2 a = net.lane_pose(lane, 2.0);
-  const Pose2 a2 = net.lane_pose(lane, 8.0);  // same piece as a
-  const Pose2 b = net.lane_pose(lane, 12.0);
-  const Pose2 c = net.lane_pose(lane, 31.0);
-  const Pose2 off{net.max_corner().x() + 500.0, net.max_corner().y() + 500.0, 0.0};
+  const LanePoses poses(net);
+  const auto& [lane, a, a2, b, c, off] = poses;
   coverage.end_episode();  // nothing observed yet: no episode
   EXPECT_TRUE(coverage.episode_reach().empty());
   // Episode 1 drives a -> b -> c (3 pieces in 5 steps, one off the road).
