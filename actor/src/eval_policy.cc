@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -310,6 +311,11 @@ int route_step_budget(double length_m, double speed_mps, double slack, double dt
       << "route_step_budget(" << length_m << ", " << speed_mps << ", " << slack << ", " << dt_s
       << ")";
   return std::max(1, static_cast<int>(std::ceil(slack * length_m / (speed_mps * dt_s) - 1e-9)));
+}
+
+env::EnvConfig protocol_env_config(env::EnvConfig config) {
+  config.events.time_limit_steps = std::numeric_limits<int>::max() / 2;
+  return config;
 }
 
 EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int steps,

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <climits>
 #include <cstdio>
 #include <fstream>
 #include <optional>
@@ -157,10 +156,8 @@ struct Evaluator::Impl {
             if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
           });
     }
-    env::EnvConfig env_config = service.env();
+    env::EnvConfig env_config = protocol_env_config(service.env());
     env_config.town = grid.towns.front();
-    // The evaluator ends episodes at the route's own budget; the env's limit must not cut first.
-    env_config.events.time_limit_steps = INT_MAX / 2;
     env = std::make_unique<env::Env>(env_config);
   }
 
@@ -197,13 +194,18 @@ struct Evaluator::Impl {
     return std::chrono::duration<double>(Clock::now() - std::max(since, beat)).count() > limit_s;
   }
 
-  void warn_silent_learner(std::uint64_t version) const {
+  // Says that the learner fell silent and what the evaluator does about it.
+  void warn_silent_learner(const std::string& consequence) const {
     INDRIVE_LOG(kWarn, "evaluator")
         << "the learner of run '" << config.run_id() << "' has been silent for more than "
         << config.config().get<double>("eval.learner_silence_s")
-        << " s without announcing its final snapshot; evaluating snapshot v" << version
-        << ", the newest received, which may not be the run's last (policy_version in the "
-           "results says which; eval.learner_silence_s sets the wait, 0 waits for the learner)";
+        << " s without announcing its final snapshot; " << consequence
+        << " (eval.learner_silence_s sets the wait, 0 waits for the learner)";
+  }
+  void warn_evaluating_unannounced(std::uint64_t version) const {
+    warn_silent_learner("evaluating snapshot v" + std::to_string(version) +
+                        ", the newest received, which may not be the run's last "
+                        "(policy_version in the results says which)");
   }
 
   // The snapshot to evaluate: newer than `after`, and the learner's final one when asked to
@@ -222,7 +224,7 @@ struct Evaluator::Impl {
         return snapshot;
       }
       if (snapshot != nullptr && learner_silent(start)) {
-        warn_silent_learner(snapshot->version());
+        warn_evaluating_unannounced(snapshot->version());
         return snapshot;
       }
       if (inbox->should_request(snapshot ? snapshot->version() : after, Clock::now())) {
@@ -384,14 +386,10 @@ struct Evaluator::Impl {
         if (evaluated > 0 && learner_silent(start)) {
           // The curve ends with the newest snapshot held, evaluated once.
           if (newest != nullptr) {
-            warn_silent_learner(newest->version());
+            warn_evaluating_unannounced(newest->version());
             next = newest;
           } else {
-            INDRIVE_LOG(kWarn, "evaluator")
-                << "the learner of run '" << config.run_id() << "' has been silent for more than "
-                << config.config().get<double>("eval.learner_silence_s")
-                << " s without announcing its final snapshot; the learning curve ends at v"
-                << evaluated;
+            warn_silent_learner("the learning curve ends at v" + std::to_string(evaluated));
           }
           break;
         }

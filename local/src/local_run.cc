@@ -391,11 +391,8 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
   grid.episodes_per_cell = episodes;
   grid.validate();
 
-  // As in the evaluator, episodes end at the route's own step budget (below): the env's
-  // training time limit (env.time_limit_steps) must not cut them first.
-  env::EnvConfig env_config = config.env();
-  env_config.events.time_limit_steps = std::numeric_limits<int>::max() / 2;
-  env::Env env(env_config);
+  // As in the evaluator, episodes end at the route's own step budget (below).
+  env::Env env(actor::protocol_env_config(config.env()));
   EpisodeCsvWriter csv(run.eval() / ("local-" + town + "-" + route + ".csv"));
   EvaluationSummary summary;
   double completion_sum = 0.0, steps_sum = 0.0;

@@ -73,6 +73,9 @@ void write_snapshot_file(const std::filesystem::path& path, std::span<const std:
 // 3-6 m/s, less than one lap.
 int route_step_budget(double length_m, double speed_mps = 3.0, double slack = 1.5,
                       double dt_s = 0.1);
+// The env config for protocol episodes: the route's step budget ends them, so the training
+// time limit (env.time_limit_steps) is lifted out of its way.
+env::EnvConfig protocol_env_config(env::EnvConfig config);
 
 // The protocol's verdict on one episode of `spec`, as a CSV row without the run-level fields
 // (run id, method, eval kind, task, seeds of training, policy version): success means the
