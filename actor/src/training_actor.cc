@@ -245,7 +245,7 @@ struct TrainingActor::Impl {
                       /*sample=*/true);
   }
 
-  void publish_result(const env::StepResult& last, double episode_return) {
+  void publish_result(const env::StepResult& last, double episode_return, int reach) {
     msg::EpisodeResult result;
     result.run_id(config.run_id());
     result.sender_role(msg::ROLE_ACTOR);
@@ -270,6 +270,7 @@ struct TrainingActor::Impl {
             ? 0.0f
             : static_cast<float>(std::min(1.0, last.route_progress_m / driven->length_m())));
     result.episode_return(static_cast<float>(episode_return));
+    result.reach_segments(static_cast<std::uint32_t>(reach));
     dds::seal(result);
     result_writer->write(result);
   }
@@ -322,7 +323,8 @@ struct TrainingActor::Impl {
         maybe_heartbeat("running");
         maybe_request();
         if (result.is_last) {
-          publish_result(result, episode_return);
+          coverage->end_episode();  // has this episode's steps: observed just above
+          publish_result(result, episode_return, coverage->episode_reach().back());
           ++stats.episodes;
           break;
         }

@@ -159,4 +159,37 @@ bool passed_multiple(std::int64_t before, std::int64_t now, std::int64_t every) 
   return every > 0 && now / every > before / every;
 }
 
+EpisodeStats::EpisodeStats(std::size_t window) : window_(window) {
+  if (window_ == 0) throw std::invalid_argument("EpisodeStats: the window must hold an episode");
+}
+
+void EpisodeStats::add(std::int64_t steps, std::int64_t reach) {
+  recent_.emplace_back(steps, reach);
+  if (recent_.size() > window_) recent_.pop_front();
+  ++episodes_;
+  ++interval_episodes_;
+  interval_steps_ += steps;
+  interval_reach_ += reach;
+}
+
+void EpisodeStats::write(nlohmann::json& record) {
+  const std::string suffix = "_last" + std::to_string(window_);
+  if (interval_episodes_ > 0) {
+    const auto n = static_cast<double>(interval_episodes_);
+    record["episode_length"] = static_cast<double>(interval_steps_) / n;
+    record["episode_reach"] = static_cast<double>(interval_reach_) / n;
+  }
+  if (!recent_.empty()) {
+    double steps = 0.0, reach = 0.0;
+    for (const auto& [s, r] : recent_) {
+      steps += static_cast<double>(s);
+      reach += static_cast<double>(r);
+    }
+    const auto n = static_cast<double>(recent_.size());
+    record["episode_length" + suffix] = steps / n;
+    record["episode_reach" + suffix] = reach / n;
+  }
+  interval_episodes_ = interval_steps_ = interval_reach_ = 0;
+}
+
 }  // namespace indrive

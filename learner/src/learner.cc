@@ -328,7 +328,7 @@ struct Learner::Impl {
     std::lock_guard<std::mutex> lock(queue_mutex);
     ++interval_episodes;
     interval_successes += result.success() ? 1 : 0;
-    interval_episode_steps += result.steps();
+    episode_stats.add(result.steps(), result.reach_segments());
   }
 
   // Moves queued chunks into replay; returns whether there were any.
@@ -483,12 +483,13 @@ struct Learner::Impl {
                                    rate.options().steps_per_update /
                                    static_cast<double>(stats.counters.env_steps)
                              : 0.0;
-    std::uint64_t episodes = 0, successes = 0, episode_steps = 0;
+    std::uint64_t episodes = 0, successes = 0;
+    auto episode_record = nlohmann::json::object();  // length and reach of the actors' episodes
     {
       std::lock_guard<std::mutex> lock(queue_mutex);
       std::swap(episodes, interval_episodes);
       std::swap(successes, interval_successes);
-      std::swap(episode_steps, interval_episode_steps);
+      episode_stats.write(episode_record);
     }
     stats.episodes += episodes;
     const double lag = interval_chunks > 0 ? interval_lag_sum / interval_chunks : 0.0;
@@ -514,10 +515,8 @@ struct Learner::Impl {
                              {"episodes", episodes},
                              {"learner_epoch", stats.counters.learner_epoch},
                              {"phase", std::string(agent::to_string(agent_config.phase))}};
-    if (episodes > 0) {
-      record["episode_success_rate"] = static_cast<double>(successes) / episodes;
-      record["episode_length"] = static_cast<double>(episode_steps) / episodes;
-    }
+    if (episodes > 0) record["episode_success_rate"] = static_cast<double>(successes) / episodes;
+    record.update(episode_record);
     for (const auto& [name, value] : last_metrics) record[name] = value;
     metrics.write(record);
 
@@ -630,7 +629,8 @@ struct Learner::Impl {
   dds::DropCounters drops;
   std::mutex queue_mutex;
   std::deque<DecodedChunk> queue;
-  std::uint64_t interval_episodes = 0, interval_successes = 0, interval_episode_steps = 0;
+  std::uint64_t interval_episodes = 0, interval_successes = 0;
+  EpisodeStats episode_stats;  // under queue_mutex
   std::map<std::uint32_t, std::uint64_t> next_seq;
   std::atomic<bool> republish_requested{false};
   std::optional<msg::PolicySnapshot> newest_snapshot;

@@ -128,7 +128,7 @@ struct LocalRun::Impl {
         coverage(town.net, {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
         environment(service,
                     [this](const env::StepResult& result) {
-                      if (result.is_first) coverage.end_episode();
+                      if (result.is_first) close_episode();
                       coverage.observe(result.ego.pose);
                     }),
         trainer(agent_config, environment,
@@ -239,7 +239,7 @@ struct LocalRun::Impl {
         {"coverage_fraction_visited", coverage.fraction_visited()},
         {"coverage_segments_visited", coverage.segments_visited()}};
     if (counters.episodes > logged_episodes) record["episode_return"] = counters.episode_return;
-    add_episode_reach(record);
+    episodes.write(record);  // length and reach, see close_episode()
     // Training metrics as means over the interval's updates (the learner logs its last update;
     // a mean is steadier for the few updates of a local run).
     for (const auto& [name, sum_count] : interval_sums) {
@@ -265,26 +265,14 @@ struct LocalRun::Impl {
     logged_episodes = counters.episodes;
   }
 
-  // Episode length and reach (distinct lane pieces per episode, see coverage.h): means over the
-  // episodes that ended in this interval, and over the last 20 (steadier for comparing runs).
-  void add_episode_reach(nlohmann::json& record) {
-    const auto& reach = coverage.episode_reach();
-    const auto& steps = coverage.episode_steps();
-    const auto mean = [&](const std::vector<int>& values, std::size_t from) {
-      double sum = 0.0;
-      for (std::size_t i = from; i < values.size(); ++i) sum += values[i];
-      return sum / static_cast<double>(values.size() - from);
-    };
-    if (reach.size() > logged_reach) {
-      record["episode_reach"] = mean(reach, logged_reach);
-      record["episode_length"] = mean(steps, logged_reach);
+  // Closes the coverage tracker's episode (the steps observed since the last reset) and counts
+  // its length and reach for metrics.jsonl.
+  void close_episode() {
+    const std::size_t closed = coverage.episode_reach().size();
+    coverage.end_episode();
+    if (coverage.episode_reach().size() > closed) {
+      episodes.add(coverage.episode_steps().back(), coverage.episode_reach().back());
     }
-    if (!reach.empty()) {
-      const std::size_t from = reach.size() > 20 ? reach.size() - 20 : 0;
-      record["episode_reach_last20"] = mean(reach, from);
-      record["episode_length_last20"] = mean(steps, from);
-    }
-    logged_reach = reach.size();
   }
 
   void train(const std::atomic<bool>& stop) {
@@ -324,6 +312,7 @@ struct LocalRun::Impl {
   CheckpointFiles checkpoints;
   env::Town town;  // for coverage; the Env loads its own copy when it starts
   env::CoverageTracker coverage;
+  EpisodeStats episodes;  // length and reach of the episodes the coverage tracker closed
   LazyEnvironment environment;
   agent::LocalTrainer trainer;
   MetricsLog metrics;
@@ -337,7 +326,6 @@ struct LocalRun::Impl {
   std::function<void(const std::string&)> progress;
   Clock::time_point last_log{}, last_checkpoint{};
   std::int64_t logged_steps = 0, logged_updates = 0, logged_episodes = 0;
-  std::size_t logged_reach = 0;  // episodes of coverage.episode_reach() already logged
 };
 
 LocalRun::LocalRun(const actor::ServiceConfig& config) : impl_(std::make_unique<Impl>(config)) {}

@@ -71,6 +71,38 @@ TEST(PassedMultiple, OnlyWhenACounterCrossesAMultiple) {
   EXPECT_FALSE(passed_multiple(0, 5000, 0));  // off
 }
 
+TEST(EpisodeStats, IntervalMeansAndTheNewestWindowOfEpisodes) {
+  EpisodeStats episodes(/*window=*/3);
+  nlohmann::json empty;
+  episodes.write(empty);
+  EXPECT_TRUE(empty.empty()) << "no episode, no keys: " << empty.dump();
+
+  episodes.add(100, 2);
+  episodes.add(300, 6);
+  nlohmann::json first;
+  episodes.write(first);
+  EXPECT_DOUBLE_EQ(first.at("episode_length").get<double>(), 200.0);
+  EXPECT_DOUBLE_EQ(first.at("episode_reach").get<double>(), 4.0);
+  EXPECT_DOUBLE_EQ(first.at("episode_length_last3").get<double>(), 200.0);
+  EXPECT_DOUBLE_EQ(first.at("episode_reach_last3").get<double>(), 4.0);
+
+  episodes.add(50, 1);
+  episodes.add(10, 9);  // pushes the first episode out of the window of 3
+  nlohmann::json second;
+  episodes.write(second);
+  EXPECT_DOUBLE_EQ(second.at("episode_length").get<double>(), 30.0);
+  EXPECT_DOUBLE_EQ(second.at("episode_reach").get<double>(), 5.0);
+  EXPECT_DOUBLE_EQ(second.at("episode_length_last3").get<double>(), 120.0);
+  EXPECT_DOUBLE_EQ(second.at("episode_reach_last3").get<double>(), 16.0 / 3.0);
+
+  nlohmann::json quiet;  // no episode since the last line: only the window's means remain
+  episodes.write(quiet);
+  EXPECT_FALSE(quiet.contains("episode_reach")) << quiet.dump();
+  EXPECT_DOUBLE_EQ(quiet.at("episode_reach_last3").get<double>(), 16.0 / 3.0);
+  EXPECT_EQ(episodes.episodes(), 4);
+  EXPECT_THROW(EpisodeStats(0), std::invalid_argument);
+}
+
 TEST(MetricsLog, AppendsOneParsableObjectPerLine) {
   testing::TempDir dir;
   const fs::path path = dir.path() / "metrics.jsonl";

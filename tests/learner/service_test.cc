@@ -277,6 +277,14 @@ TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExi
   EXPECT_GT(final_announced, 0u);
   EXPECT_EQ(final_announced, newest_snapshot);
   EXPECT_EQ(final_announced, metrics.value("policy_version", 0u)) << metrics.dump();
+
+  // The same run's episodes (at most 151 steps each, so two or more within the budget) reach
+  // the learner's metrics from the actor's EpisodeResults: their length, and their reach in
+  // distinct lane segments, which counts at least the spawn's segment.
+  ASSERT_TRUE(metrics.contains("episode_reach_last20")) << metrics.dump();
+  EXPECT_GE(metrics["episode_reach_last20"].get<double>(), 1.0) << metrics.dump();
+  EXPECT_GT(metrics["episode_length_last20"].get<double>(), 0.0) << metrics.dump();
+  EXPECT_LE(metrics["episode_length_last20"].get<double>(), 151.0) << metrics.dump();
 }
 
 }  // namespace

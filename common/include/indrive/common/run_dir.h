@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json_fwd.hpp>
@@ -97,5 +98,33 @@ class MetricsLog {
 // `every` <= 0): the learner and the local trainer write a metrics line at each multiple of
 // learner.log_every_env_steps as well as by time.
 bool passed_multiple(std::int64_t before, std::int64_t now, std::int64_t every);
+
+// Length and reach (distinct lane segments driven from spawn to end, envserver/coverage.h) of
+// training episodes, for metrics.jsonl: the learner (from the actors' EpisodeResults) and the
+// local trainer (from its coverage tracker) log the same keys with the same meaning.
+//
+//   EpisodeStats episodes;
+//   episodes.add(/*steps=*/240, /*reach=*/9);   // per finished episode
+//   episodes.write(record);                    // per metrics line
+class EpisodeStats {
+ public:
+  // `window`: the recent episodes behind the *_last<window> keys (20 in every run so far).
+  explicit EpisodeStats(std::size_t window = 20);
+
+  void add(std::int64_t steps, std::int64_t reach);
+
+  // Adds episode_length and episode_reach (means over the episodes added since the last call;
+  // left out when there were none) and episode_length_last20 / episode_reach_last20 (means over
+  // the newest `window` episodes ever added; left out before the first) to `record`.
+  void write(nlohmann::json& record);
+
+  std::int64_t episodes() const { return episodes_; }
+
+ private:
+  std::size_t window_;
+  std::deque<std::pair<std::int64_t, std::int64_t>> recent_;  // (steps, reach), newest last
+  std::int64_t episodes_ = 0;
+  std::int64_t interval_episodes_ = 0, interval_steps_ = 0, interval_reach_ = 0;
+};
 
 }  // namespace indrive
