@@ -166,7 +166,6 @@ EpisodeStats::EpisodeStats(std::size_t window) : window_(window) {
 void EpisodeStats::add(std::int64_t steps, std::int64_t reach) {
   recent_.emplace_back(steps, reach);
   if (recent_.size() > window_) recent_.pop_front();
-  ++episodes_;
   ++interval_episodes_;
   interval_steps_ += steps;
   interval_reach_ += reach;

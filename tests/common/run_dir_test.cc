@@ -99,7 +99,6 @@ TEST(EpisodeStats, IntervalMeansAndTheNewestWindowOfEpisodes) {
   episodes.write(quiet);
   EXPECT_FALSE(quiet.contains("episode_reach")) << quiet.dump();
   EXPECT_DOUBLE_EQ(quiet.at("episode_reach_last3").get<double>(), 16.0 / 3.0);
-  EXPECT_EQ(episodes.episodes(), 4);
   EXPECT_THROW(EpisodeStats(0), std::invalid_argument);
 }
 

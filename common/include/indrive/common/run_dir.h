@@ -118,12 +118,9 @@ class EpisodeStats {
   // the newest `window` episodes ever added; left out before the first) to `record`.
   void write(nlohmann::json& record);
 
-  std::int64_t episodes() const { return episodes_; }
-
  private:
   std::size_t window_;
   std::deque<std::pair<std::int64_t, std::int64_t>> recent_;  // (steps, reach), newest last
-  std::int64_t episodes_ = 0;
   std::int64_t interval_episodes_ = 0, interval_steps_ = 0, interval_reach_ = 0;
 };
 
