@@ -98,6 +98,9 @@ const std::vector<Key>& keys() {
       INDRIVE_NUMBER_KEY("intrinsic.units", intrinsic.units),
       INDRIVE_NUMBER_KEY("intrinsic.layers", intrinsic.layers),
       INDRIVE_NUMBER_KEY("intrinsic.rnd_embed", intrinsic.rnd_embed),
+      INDRIVE_NUMBER_KEY("intrinsic.disag_scale", intrinsic.disag_scale),
+      INDRIVE_NUMBER_KEY("intrinsic.icm_scale", intrinsic.icm_scale),
+      INDRIVE_NUMBER_KEY("intrinsic.rnd_scale", intrinsic.rnd_scale),
       INDRIVE_NUMBER_KEY("intrinsic.icm_eta", intrinsic.icm_eta),
       INDRIVE_NUMBER_KEY("intrinsic.icm_inverse_scale", intrinsic.icm_inverse_scale),
       INDRIVE_NUMBER_KEY("intrinsic.norm_rate", intrinsic.norm_rate),
@@ -197,6 +200,8 @@ void validate(const AgentConfig& config) {
   require(in.units > 0 && in.layers >= 0 && in.rnd_embed > 0, "intrinsic sizes must be positive");
   require(in_unit_interval(in.norm_rate), "intrinsic.norm_rate must be in (0, 1]");
   require(in.norm_eps > 0.0f, "intrinsic.norm_eps must be > 0");
+  require(in.disag_scale > 0.0f && in.icm_scale > 0.0f && in.rnd_scale > 0.0f,
+          "intrinsic.disag_scale, icm_scale and rnd_scale must be > 0");
   const BehaviorConfig& b = config.behavior;
   require(b.horizon >= 1, "behavior.horizon must be >= 1");
   require(in_unit_interval(b.gamma) && b.lambda >= 0.0f && b.lambda <= 1.0f,

@@ -42,6 +42,15 @@ Transitions make_transitions(Tensor features, Tensor post_probs, Tensor actions,
 
 IntrinsicModule::IntrinsicModule(const IntrinsicConfig& config) : config_(config) {}
 
+void IntrinsicModule::scale_raw(std::vector<float>& raw, float scale) {
+  double sum = 0.0;
+  for (float& r : raw) {
+    sum += r;
+    r *= scale;
+  }
+  last_raw_reward_ = raw.empty() ? 0.0f : static_cast<float>(sum / static_cast<double>(raw.size()));
+}
+
 void IntrinsicModule::make_optimizer() {
   optimizer_ = std::make_unique<nn::Adam>(
       params_, nn::AdamConfig{.lr = config_.lr, .eps = config_.eps, .clip = config_.clip});
@@ -133,6 +142,7 @@ std::vector<float> LatentDisagreement::reward(Tensor feat, Tensor action, Tensor
     for (Tensor& p : preds) p = Tensor();
     graph.rewind(mark);
   }
+  scale_raw(out, config_.disag_scale);
   return out;
 }
 
@@ -165,6 +175,7 @@ std::vector<float> Icm::reward(Tensor feat, Tensor action, Tensor next_feat) {
   Tensor pred = forward_(nn::concat({feat, action}, -1));
   std::vector<float> error = to_vector(nn::scale(row_sum(nn::squared_error(pred, next_feat)),
                                                  1.0f / static_cast<float>(pred.dim(1))));
+  scale_raw(error, config_.icm_scale);
   norm_.update(error);
   norm_.normalize(error);
   for (float& r : error) r *= config_.icm_eta;
@@ -200,6 +211,7 @@ std::vector<float> Rnd::reward(Tensor feat, Tensor action, Tensor next_feat) {
   std::vector<float> error =
       to_vector(nn::scale(row_sum(nn::squared_error(predictor_(next_feat), target)),
                           1.0f / static_cast<float>(target.dim(1))));
+  scale_raw(error, config_.rnd_scale);
   norm_.update(error);
   norm_.normalize(error);
   return error;

@@ -130,7 +130,7 @@ TEST(LatentDisagreement, RewardIsHigherOnPairsTheEnsembleWasNotTrainedOn) {
   EXPECT_GT(unseen, 3.0f * seen);
 }
 
-TEST(LatentDisagreement, RewardIsTheMeanVarianceAcrossMembers) {
+TEST(LatentDisagreement, RewardIsTheScaledMeanVarianceAcrossMembers) {
   nn::Rng rng(6);
   const WorldModelConfig model = preset("tiny").world_model;
   IntrinsicConfig config = small_intrinsic(Method::kDisag);
@@ -157,9 +157,13 @@ TEST(LatentDisagreement, RewardIsTheMeanVarianceAcrossMembers) {
     var_sum += var;
     std_sum += std::sqrt(var);
   }
-  EXPECT_NEAR(var_reward[1], var_sum / s, 1e-7);
-  EXPECT_NEAR(std_reward[1], std_sum / s, 1e-6);
+  // The reward is the paper's formula times disag_scale; the raw mean is kept for metrics.
+  const double scale = config.disag_scale;
+  EXPECT_EQ(scale, 1e4);
+  EXPECT_NEAR(var_reward[1], scale * var_sum / s, scale * 1e-7);
+  EXPECT_NEAR(std_reward[1], scale * std_sum / s, scale * 1e-6);
   EXPECT_GT(var_reward[1], 0.0f);
+  EXPECT_NEAR(ld_std.last_raw_reward(), (std_reward[0] + std_reward[1]) / (2 * scale), 1e-6);
 }
 
 TEST(Icm, ForwardErrorRewardIsHigherOnUnseenTransitions) {

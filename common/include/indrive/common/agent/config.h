@@ -77,9 +77,17 @@ struct IntrinsicConfig {
   Method method = Method::kDisag;
   int ensemble = 8;  // K predictors of the LD ensemble
   DisagReward disag_reward = DisagReward::kVariance;
-  int units = 256;                 // hidden units of every intrinsic MLP
-  int layers = 2;                  // hidden layers of every intrinsic MLP
-  int rnd_embed = 256;             // output size of the RND target/predictor
+  int units = 256;      // hidden units of every intrinsic MLP
+  int layers = 2;       // hidden layers of every intrinsic MLP
+  int rnd_embed = 256;  // output size of the RND target/predictor
+  // Scale of each module's raw signal before anything else is applied to it (LD: the reward
+  // is disag_scale * mean variance; ICM and RND: Norm(scale * error)). One rule sets all three
+  // (docs/architecture.md "Intrinsic reward scale"): the raw signal must reach the actor-critic
+  // at order 1, above the return normaliser's floor and wider than a two-hot bin. LD's 1e4 is
+  // Plan2Explore's intrinsic_reward_scale; ICM's and RND's come from the same rule, measured.
+  float disag_scale = 1e4f;
+  float icm_scale = 1.0f;
+  float rnd_scale = 1.0f;
   float icm_eta = 1.0f;            // ICM reward scale
   float icm_inverse_scale = 1.0f;  // weight of the ICM inverse loss
   float norm_rate = 0.01f;         // rho of the EMA mean/variance normaliser

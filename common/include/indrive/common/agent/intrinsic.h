@@ -1,10 +1,12 @@
 // Intrinsic reward modules of the pretraining phase, all on u_t = [h_t; s_t] with a
 // stop-gradient into the world model, each with its own optimiser:
 //   LD   (latent disagreement): K predictors of the next posterior's categorical probabilities
-//        from [u_t, onehot(a_t)]; reward = mean over latent dims of the variance across members.
+//        from [u_t, onehot(a_t)]; reward = disag_scale * mean over latent dims of the variance
+//        across members.
 //   ICM: inverse model CE(a_hat(u_t, u_{t+1}), a_t) and forward model ||u_hat_{t+1} - u_{t+1}||^2;
-//        reward = eta * Norm(forward error).
-//   RND: fixed random target f(u), trained predictor p(u); reward = Norm(||p - f||^2).
+//        reward = eta * Norm(icm_scale * forward error).
+//   RND: fixed random target f(u), trained predictor p(u); reward = Norm(rnd_scale * ||p - f||^2).
+// The scales bring each raw signal to order 1 (config.h, IntrinsicConfig).
 //
 // The learner adds loss() to its total loss (one backward per step) and then calls step();
 // rewards of imagined transitions come from reward(), which records no tape.
@@ -55,6 +57,9 @@ class IntrinsicModule {
   virtual void set_normalizer_state(std::span<const float> state) { (void)state; }
   // Value of the last loss() terms, for metrics.
   float last_loss() const { return last_loss_; }
+  // Mean raw signal of the last reward() call (LD: variance or std; ICM: forward error; RND:
+  // prediction error), before the module's scale and normaliser, for metrics.
+  float last_raw_reward() const { return last_raw_reward_; }
 
  protected:
   explicit IntrinsicModule(const IntrinsicConfig& config);
@@ -64,6 +69,9 @@ class IntrinsicModule {
   nn::ParamGroup params_{"intrinsic"};
   std::unique_ptr<nn::Adam> optimizer_;
   float last_loss_ = 0.0f;
+  float last_raw_reward_ = 0.0f;
+  // Records the mean of the raw signal and multiplies it by `scale` in place.
+  void scale_raw(std::vector<float>& raw, float scale);
 };
 
 // Latent ensemble disagreement (InDRiVE).
