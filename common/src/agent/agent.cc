@@ -191,7 +191,14 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   // Behaviour in imagination from every posterior state.
   ActorCritic& behavior = task_phase ? *task_ : *expl_;
   const RssmState start{nn::stop_gradient(out.deter), nn::stop_gradient(out.stoch)};
-  ImaginedTrajectory traj = behavior.imagine(*wm_, start, rng_);
+  std::vector<float> start_cont;
+  {
+    // Time-major like the posterior states: row t * B + i is step t of sequence i.
+    Tensor terminal = WorldModel::time_major_column(batch.is_terminal, b, t);
+    start_cont.reserve(terminal.numel());
+    for (float x : terminal.values()) start_cont.push_back(1.0f - x);
+  }
+  ImaginedTrajectory traj = behavior.imagine(*wm_, start, rng_, std::move(start_cont));
   timing_.imagine = clock.lap();
   std::vector<float> rewards;
   {
@@ -201,6 +208,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
       rewards.assign(r.values().begin(), r.values().end());
     } else {
       rewards = intrinsic_->reward(traj.state_features(), traj.actions, traj.next_features());
+      metrics.emplace_back("intrinsic/raw_reward", intrinsic_->last_raw_reward());
     }
   }
   timing_.reward = clock.lap();
@@ -210,6 +218,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   metrics.insert(metrics.end(), {{prefix + "reward", bm.reward_mean},
                                  {prefix + "return", bm.return_mean},
                                  {prefix + "return_scale", bm.return_scale},
+                                 {prefix + "value", bm.value_mean},
                                  {prefix + "actor_loss", bm.actor_loss},
                                  {prefix + "critic_loss", bm.critic_loss},
                                  {prefix + "entropy", bm.entropy}});

@@ -59,11 +59,15 @@ Tensor ActorCritic::action_probs(Tensor features) {
   return nn::unimix_probs(actor_(features), kNumActions, config_.actor_unimix);
 }
 
-ImaginedTrajectory ActorCritic::imagine(WorldModel& wm, const RssmState& start, nn::Rng& rng) {
+ImaginedTrajectory ActorCritic::imagine(WorldModel& wm, const RssmState& start, nn::Rng& rng,
+                                        std::vector<float> start_cont) {
   nn::NoGradGuard no_grad;
   ImaginedTrajectory traj;
   traj.horizon = config_.horizon;
   traj.n = static_cast<int>(start.deter.dim(0));
+  INDRIVE_CHECK(start_cont.empty() || static_cast<int>(start_cont.size()) == traj.n)
+      << "start_cont has " << start_cont.size() << " entries for " << traj.n << " start states";
+  traj.start_cont = std::move(start_cont);
   RssmState state{nn::stop_gradient(start.deter), nn::stop_gradient(start.stoch)};
   std::vector<Tensor> feats{WorldModel::features(state)}, actions;
   for (int t = 0; t < traj.horizon; ++t) {
@@ -101,7 +105,7 @@ Tensor ActorCritic::loss(const ImaginedTrajectory& traj, const std::vector<float
     slow_values.assign(slow.values().begin(), slow.values().end());
   }
   returns = lambda_returns(rewards, traj.cont, values, h, n, config_.gamma, config_.lambda);
-  for (int i = 0; i < n; ++i) weights[i] = 1.0f;
+  for (int i = 0; i < n; ++i) weights[i] = traj.start_cont.empty() ? 1.0f : traj.start_cont[i];
   for (int t = 1; t < h; ++t) {
     for (int i = 0; i < n; ++i) {
       weights[t * n + i] = weights[(t - 1) * n + i] * config_.gamma * traj.cont[(t - 1) * n + i];
@@ -129,10 +133,12 @@ Tensor ActorCritic::loss(const ImaginedTrajectory& traj, const std::vector<float
   if (metrics != nullptr) {
     metrics->actor_loss = actor_loss.item();
     metrics->critic_loss = critic_loss.item();
-    float ent = 0, ret = 0, rew = 0;
+    float ent = 0, ret = 0, rew = 0, val = 0;
     for (float e : entropy.values()) ent += e;
     for (float r : returns) ret += r;
     for (float r : rewards) rew += r;
+    for (std::int64_t k = 0; k < rows; ++k) val += values[k];
+    metrics->value_mean = val * inv_rows;
     metrics->entropy = ent * inv_rows;
     metrics->return_mean = ret * inv_rows;
     metrics->reward_mean = rew * inv_rows;

@@ -28,6 +28,10 @@ struct ImaginedTrajectory {
   nn::Tensor features;      // ((H + 1) * N, feat): u_0 .. u_H, row t * N + i
   nn::Tensor actions;       // (H * N, 9) one-hot a_t taken at u_t
   std::vector<float> cont;  // (H * N) continuation probability of the transition t -> t + 1
+  // (N) continuation of each start state, 1 - is_terminal of its replay step (DreamerV3 weights
+  // the first imagined step by it, so a rollout from a terminal state teaches nothing); empty
+  // means every start continues.
+  std::vector<float> start_cont;
   // u_t rows [t * N, (t + 1) * N) and u_{t+1}, as views for reward computation.
   nn::Tensor state_features() const;  // (H * N, feat) u_0 .. u_{H-1}
   nn::Tensor next_features() const;   // (H * N, feat) u_1 .. u_H
@@ -37,6 +41,7 @@ struct ImaginedTrajectory {
 struct BehaviorMetrics {
   float actor_loss = 0, critic_loss = 0, entropy = 0, return_mean = 0, reward_mean = 0;
   float return_scale = 0;
+  float value_mean = 0;  // the critic's mean value of the H * N imagined states
 };
 
 // One actor and one critic (with its slow copy), e.g. the exploration or the task behaviour.
@@ -50,7 +55,9 @@ class ActorCritic {
   // Action probabilities (N, 9) with the 1% uniform mix, from features (N, feat).
   nn::Tensor action_probs(nn::Tensor features);
   // Rolls the actor through the prior for H steps from `start` (N rows, stop-gradient).
-  ImaginedTrajectory imagine(WorldModel& wm, const RssmState& start, nn::Rng& rng);
+  // start_cont (N, or empty) is the start states' continuation, kept in the trajectory.
+  ImaginedTrajectory imagine(WorldModel& wm, const RssmState& start, nn::Rng& rng,
+                             std::vector<float> start_cont = {});
   // Actor + critic loss (a recorded scalar) of a trajectory and its rewards (H * N), reward
   // t belonging to the transition u_t -> u_{t+1}. Updates the return normaliser.
   nn::Tensor loss(const ImaginedTrajectory& traj, const std::vector<float>& rewards,
