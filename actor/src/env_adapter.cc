@@ -6,8 +6,38 @@
 
 namespace indrive::actor {
 
+std::vector<std::string> route_list(const std::string& text) {
+  std::vector<std::string> out;
+  if (text.find_first_not_of(" \t") == std::string::npos) return out;
+  std::size_t begin = 0;
+  while (true) {
+    const std::size_t end = text.find(',', begin);
+    std::string name =
+        text.substr(begin, end == std::string::npos ? std::string::npos : end - begin);
+    name.erase(0, name.find_first_not_of(" \t"));
+    name.erase(name.find_last_not_of(" \t") + 1);
+    if (name.empty()) {
+      throw std::invalid_argument("env.route '" + text +
+                                  "' has an empty name; give route names separated by commas, "
+                                  "e.g. straight,right_loop");
+    }
+    out.push_back(std::move(name));
+    if (end == std::string::npos) return out;
+    begin = end + 1;
+  }
+}
+
+std::string draw_route(const std::vector<std::string>& routes, std::mt19937_64& rng) {
+  if (routes.empty()) return "";
+  if (routes.size() == 1) return routes.front();
+  return routes[rng() % routes.size()];
+}
+
 EnvAdapter::EnvAdapter(env::Env& env, EnvAdapterOptions options)
-    : env_(env), options_(std::move(options)), rng_(options_.seed * 7919u + 17u) {
+    : env_(env),
+      options_(std::move(options)),
+      routes_(route_list(options_.route)),
+      rng_(options_.seed * 7919u + 17u) {
   if (options_.densities.empty()) {
     throw std::invalid_argument("env.densities is empty: give at least one of 0, 5, 10, 20");
   }
@@ -44,7 +74,8 @@ agent::EnvStep EnvAdapter::reset() {
   }
   const std::uint64_t traffic_seed = rng_() % 1000000u;
   const std::uint64_t spawn_seed = rng_() % 1000000u;
-  return convert(env_.reset({.route = options_.route,
+  const std::string route = draw_route(routes_, rng_);
+  return convert(env_.reset({.route = route,
                              .density = density_,
                              .traffic_seed = traffic_seed,
                              .spawn_seed = spawn_seed}));

@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "indrive/actor/chunk_builder.h"
+#include "indrive/actor/env_adapter.h"
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/common/agent/policy.h"
 #include "indrive/common/check.h"
@@ -123,7 +124,7 @@ struct TrainingActor::Impl {
 
     densities = service.config().get<std::vector<double>>("env.densities");
     density_period = service.config().get<std::int64_t>("env.density_period_steps");
-    route = service.config().get<std::string>("env.route");
+    routes = route_list(service.config().get<std::string>("env.route"));
     env = std::make_unique<env::Env>(env_config);
     coverage = std::make_unique<env::CoverageTracker>(
         env->town().net,
@@ -288,6 +289,7 @@ struct TrainingActor::Impl {
       }
       traffic_seed = rng() % 1000000u;
       spawn_seed = rng() % 1000000u;
+      route = draw_route(routes, rng);
       env::StepResult result = env->reset({.route = route,
                                            .density = density,
                                            .traffic_seed = traffic_seed,
@@ -382,7 +384,8 @@ struct TrainingActor::Impl {
   Clock::time_point last_coverage_write = Clock::now();
   std::vector<double> densities;
   std::int64_t density_period = 10000;
-  std::string route;
+  std::vector<std::string> routes;  // env.route as a list (empty: random spawns)
+  std::string route;                // the current episode's
   int density = 10;
   std::uint64_t traffic_seed = 0;
   std::uint64_t spawn_seed = 0;

@@ -11,6 +11,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 
+#include "indrive/actor/env_adapter.h"
 #include "indrive/actor/process_cli.h"
 #include "indrive/common/log.h"
 #include "indrive/local/local_run.h"
@@ -30,7 +31,8 @@ int main(int argc, char** argv) {
                  "evaluate the newest checkpoint instead of training: this many episodes per "
                  "density of eval.densities, with the protocol's seeds")
       ->check(CLI::Range(1, 100000));
-  app.add_option("--route", route, "route to evaluate on (and to train on: sets env.route)");
+  app.add_option("--route", route,
+                 "route(s) to evaluate on, comma-separated (and to train on: sets env.route)");
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -42,11 +44,15 @@ int main(int argc, char** argv) {
     if (evaluate_episodes > 0) {
       if (route.empty()) route = config.config().get<std::string>("env.route");
       if (route.empty()) route = "straight";
-      const auto summary = indrive::local::evaluate_locally(config, route, evaluate_episodes, stop);
-      std::printf("evaluation %s %s: SR %.1f%% (%d/%d), route completion %.3f, %.1f steps\n",
-                  config.run_id().c_str(), route.c_str(), 100.0 * summary.success_rate,
-                  summary.successes, summary.episodes, summary.mean_route_completion,
-                  summary.mean_steps);
+      // env.route may list several routes (task runs draw one per episode): each is evaluated.
+      for (const std::string& name : indrive::actor::route_list(route)) {
+        const auto summary =
+            indrive::local::evaluate_locally(config, name, evaluate_episodes, stop);
+        std::printf("evaluation %s %s: SR %.1f%% (%d/%d), route completion %.3f, %.1f steps\n",
+                    config.run_id().c_str(), name.c_str(), 100.0 * summary.success_rate,
+                    summary.successes, summary.episodes, summary.mean_route_completion,
+                    summary.mean_steps);
+      }
       return 0;
     }
     indrive::local::LocalRun run(config);

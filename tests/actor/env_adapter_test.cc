@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+#include <random>
 #include <set>
 
 namespace indrive::actor {
@@ -67,6 +69,31 @@ TEST(EnvAdapterTest, RejectsUnusableOptions) {
   env::Env env(small_env(""));
   EXPECT_THROW(EnvAdapter(env, {.densities = {}}), std::invalid_argument);
   EXPECT_THROW(EnvAdapter(env, {.density_period_steps = 0}), std::invalid_argument);
+  EXPECT_THROW(EnvAdapter(env, {.route = "straight,,two_turn"}), std::invalid_argument);
+}
+
+TEST(EnvAdapterTest, ARouteListIsReadAndEveryRouteIsDrawn) {
+  EXPECT_TRUE(route_list("").empty());
+  EXPECT_EQ(route_list("straight"), std::vector<std::string>{"straight"});
+  EXPECT_EQ(route_list(" straight, two_turn "), (std::vector<std::string>{"straight", "two_turn"}));
+  // One route never consumes the generator, so a one-route run keeps its seeds.
+  std::mt19937_64 rng(3), same(3);
+  EXPECT_EQ(draw_route({"straight"}, rng), "straight");
+  EXPECT_EQ(rng(), same());
+  // Several: each is drawn, and the episodes of a task run follow them.
+  const std::vector<std::string> routes = route_list("straight,right_loop,left_loop,two_turn");
+  std::map<std::string, int> drawn;
+  for (int i = 0; i < 200; ++i) ++drawn[draw_route(routes, rng)];
+  for (const std::string& r : routes) EXPECT_GT(drawn[r], 20) << r;
+  env::Env env(small_env("lane_following"));
+  EnvAdapter adapter(env, {.route = "straight,two_turn", .densities = {0}, .seed = 2});
+  std::map<std::string, int> episodes;
+  for (int i = 0; i < 8; ++i) {
+    adapter.reset();
+    ASSERT_NE(env.route(), nullptr);
+    ++episodes[env.route()->name()];
+  }
+  EXPECT_EQ(episodes.size(), 2u);
 }
 
 }  // namespace

@@ -22,9 +22,19 @@
 
 namespace indrive::actor {
 
+// The routes named by `env.route`: none (empty text: random spawns, pretraining), one name, or
+// a comma-separated list (task phases on several fixed routes, as the paper fine-tunes on the
+// training town's routes). Spaces around names are dropped; throws std::invalid_argument for
+// an empty name in a list ("a,,b").
+std::vector<std::string> route_list(const std::string& text);
+
+// The route of the next episode: the only one, or one drawn uniformly from several; draws
+// from `rng` only when there is a choice, so a one-route run's seeds are unchanged.
+std::string draw_route(const std::vector<std::string>& routes, std::mt19937_64& rng);
+
 // Episode choices of the adapter.
 struct EnvAdapterOptions {
-  std::string route;                     // empty: random spawns without a route (pretraining)
+  std::string route;  // env.route: empty (random spawns), one route or a comma-separated list
   std::vector<double> densities = {10};  // drawn uniformly every density_period_steps
   std::int64_t density_period_steps = 10000;
   std::uint64_t seed = 0;  // seeds densities, traffic and spawns
@@ -60,6 +70,7 @@ class EnvAdapter : public agent::Environment {
 
   env::Env& env_;
   EnvAdapterOptions options_;
+  std::vector<std::string> routes_;
   std::mt19937_64 rng_;
   std::function<void(const env::StepResult&)> observer_;
   env::StepResult last_;
