@@ -27,7 +27,8 @@ int main(int argc, char** argv) {
   bool continuous = false;
   app.add_option("--policy", policy, "evaluation policy: snapshot, oracle or random (eval.policy)");
   app.add_option("--snapshot", snapshot,
-                 "evaluate this snapshot file (eval.snapshot_file) instead of the learner's");
+                 "evaluate this snapshot file (eval.snapshot_file) instead of the learner's; "
+                 "the model's preset and sizes come from the file");
   app.add_flag("--continuous", continuous,
                "evaluate every eval.every_k-th new snapshot into a learning curve");
   CLI11_PARSE(app, argc, argv);

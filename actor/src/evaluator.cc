@@ -122,14 +122,18 @@ struct Evaluator::Impl {
         policy = make_random_policy(agent_config.seed);
         break;
       case PolicySource::kSnapshot:
+        if (!snapshot_file.empty()) {
+          // The file's header sizes the model (and the camera) unless the config chose sizes.
+          const SnapshotFile file = read_snapshot_file(snapshot_file);
+          const std::string name = "snapshot file " + snapshot_file.string();
+          const std::string note =
+              adopt_snapshot_architecture(agent_config, file, service.agent_choices(), name);
+          if (!note.empty()) INDRIVE_LOG(kInfo, "evaluator") << note;
+          policy = make_snapshot_policy(agent_config, file.blob, head, name);
+        }
         method = agent_config.phase == agent::Phase::kDreamer
                      ? "dreamer"
                      : std::string(agent::to_string(agent_config.intrinsic.method));
-        if (!snapshot_file.empty()) {
-          const auto blob = read_snapshot_file(snapshot_file);
-          policy = make_snapshot_policy(agent_config, blob, head,
-                                        "snapshot file " + snapshot_file.string());
-        }
         break;
     }
     task = head == PolicyHead::kExploration ? "exploration" : agent_config.task;
@@ -156,7 +160,7 @@ struct Evaluator::Impl {
             if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
           });
     }
-    env::EnvConfig env_config = protocol_env_config(service.env());
+    env::EnvConfig env_config = protocol_env_config(service.env(agent_config));
     env_config.town = grid.towns.front();
     env = std::make_unique<env::Env>(env_config);
   }
@@ -350,7 +354,7 @@ struct Evaluator::Impl {
       // Kept so the same snapshot can be evaluated again without a learner (--snapshot FILE).
       write_snapshot_file(
           config.run_dir() / "eval" / ("snapshot-v" + std::to_string(version) + ".params"),
-          snapshot->params());
+          snapshot->params(), agent_config);
       INDRIVE_LOG(kInfo, "evaluator")
           << "evaluator " << index << "/" << count << " evaluates snapshot v" << version
           << ", received " << std::chrono::duration<double>(Clock::now() - start).count()

@@ -194,8 +194,20 @@ agent::AgentConfig ServiceConfig::agent() const {
   return agent;
 }
 
-env::EnvConfig ServiceConfig::env() const {
-  const agent::AgentConfig agent = this->agent();
+std::map<std::string, std::string> ServiceConfig::agent_choices() const {
+  std::map<std::string, std::string> choices;
+  if (!config_.preset().empty()) choices["preset"] = config_.preset_origin();
+  for (const auto& [key, value] : config_.values()) {
+    if (!key.starts_with(kAgentPrefix)) continue;
+    std::string origin = config_.origin(key);
+    if (!origin.empty()) choices[key.substr(std::string(kAgentPrefix).size())] = std::move(origin);
+  }
+  return choices;
+}
+
+env::EnvConfig ServiceConfig::env() const { return env(agent()); }
+
+env::EnvConfig ServiceConfig::env(const agent::AgentConfig& agent) const {
   env::EnvConfig env;
   env.town = config_.get<std::string>("env.town");
   env.sumo.mode = config_.get<std::string>("env.sumo_mode") == "libtraci" ? env::SumoMode::kLibtraci

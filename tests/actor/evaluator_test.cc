@@ -177,13 +177,15 @@ TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {
   agent::AgentConfig agent_config = agent::preset("tiny");
   agent::Agent agent(agent_config);
   const auto file = dir.path() / "snapshot-v7.params";
-  write_snapshot_file(file, agent.snapshot());
-  // No DDS: a learner's snapshot would time out after 1 s and return 2.
-  const auto config =
-      resolve(dir.path() / "disag-s1",
-              {"eval.snapshot_file=" + file.string(), "eval.towns=town02", "eval.routes=straight",
-               "eval.densities=[5]", "eval.episodes_per_cell=2", "eval.snapshot_timeout_s=1",
-               "eval.video_episodes=1"});
+  write_snapshot_file(file, agent.snapshot(), agent_config);
+  // No DDS: a learner's snapshot would time out after 1 s and return 2. No preset either: the
+  // file's header sizes the model and the camera (tiny, 32 px, where the default is cpu).
+  const auto config = ServiceConfig::resolve(
+      {.run_dir = dir.path() / "disag-s1",
+       .overrides = {"eval.snapshot_file=" + file.string(), "eval.towns=town02",
+                     "eval.routes=straight", "eval.densities=[5]", "eval.episodes_per_cell=2",
+                     "eval.snapshot_timeout_s=1", "eval.video_episodes=1"}});
+  ASSERT_EQ(config.agent().preset, "cpu");
   Evaluator evaluator(config, 0, 1);
   const std::atomic<bool> stop{false};
   ASSERT_EQ(evaluator.run(stop), 0);
@@ -332,7 +334,9 @@ TEST(Evaluator, LearnersFinalSnapshotIsEvaluatedAndKeptAsAFile) {
   expect_one_row_of(dir.path() / "dds-run", 3);
   EXPECT_EQ(read_episode_csv(dir.path() / "dds-run/eval/evaluator-0.csv").at(0).method, "disag");
   const auto kept = dir.path() / "dds-run/eval/snapshot-v3.params";
-  EXPECT_EQ(read_snapshot_file(kept), learner.agent.snapshot());
+  const SnapshotFile kept_file = read_snapshot_file(kept);
+  EXPECT_EQ(kept_file.blob, learner.agent.snapshot());
+  EXPECT_EQ(kept_file.value("preset"), "tiny") << "the kept file names its architecture";
   EXPECT_FALSE(std::filesystem::exists(dir.path() / "dds-run/eval/snapshot-v2.params"));
 }
 
@@ -461,11 +465,21 @@ TEST(Evaluator, BadInputsAreClearErrorsBeforeAnythingStarts) {
   // A pretraining snapshot has no task actor: few-shot evaluation of it is refused.
   agent::Agent agent(agent::preset("tiny"));
   const auto file = dir.path() / "pretrain.params";
-  write_snapshot_file(file, agent.snapshot());
+  write_snapshot_file(file, agent.snapshot(), agent::preset("tiny"));
   message = setup_error(
       resolve(dir.path() / "r", {"eval.snapshot_file=" + file.string(), "eval.kind=few_shot"}));
   EXPECT_NE(message.find(file.string()), std::string::npos) << message;
   EXPECT_NE(message.find("not task_actor"), std::string::npos) << message;
+
+  // Sizes chosen against the file's: both values named, and what to do.
+  message = setup_error(
+      ServiceConfig::resolve({.run_dir = dir.path() / "r",
+                              .overrides = {"preset=cpu", "eval.snapshot_file=" + file.string()}}));
+  EXPECT_NE(message.find("was trained with preset tiny"), std::string::npos) << message;
+  EXPECT_NE(message.find("world_model.image=64 (preset 'cpu') where the file has 32"),
+            std::string::npos)
+      << message;
+  EXPECT_NE(message.find("drop --set preset=cpu"), std::string::npos) << message;
 
   message = setup_error(resolve(
       dir.path() / "r", {"eval.snapshot_file=" + (dir.path() / "missing.params").string()}));

@@ -33,6 +33,24 @@ TEST(ServiceConfigTest, PresetFileAndOverridesReachTheAgentAndEnvironment) {
   EXPECT_EQ(config.wire_phase(), msg::PHASE_PRETRAIN);
 }
 
+TEST(ServiceConfigTest, AgentChoicesNameWhatTheConfigurationChose) {
+  testing::TempDir dir;
+  const auto defaults = ServiceConfig::resolve({.run_dir = dir.path() / "r"});
+  EXPECT_TRUE(defaults.agent_choices().empty()) << "nothing chosen: every agent key is a default";
+
+  const auto config = ServiceConfig::resolve(
+      {.run_dir = dir.path() / "r", .overrides = {"preset=tiny", "agent.world_model.deter=64"}});
+  const auto choices = config.agent_choices();
+  EXPECT_EQ(choices.at("preset"), "--set preset=tiny");
+  EXPECT_EQ(choices.at("world_model.deter"), "--set agent.world_model.deter=64");
+  EXPECT_EQ(choices.at("world_model.image"), "preset 'tiny'");
+  EXPECT_FALSE(choices.contains("phase"));
+
+  // The environment of another agent config renders that config's image size.
+  agent::AgentConfig small = agent::preset("small");
+  EXPECT_EQ(defaults.env(small).camera.width, 128);
+}
+
 TEST(ServiceConfigTest, TaskPhasesSetTheEnvironmentTask) {
   testing::TempDir dir;
   const auto config = ServiceConfig::resolve(

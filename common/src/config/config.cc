@@ -431,6 +431,7 @@ void Config::apply_preset(std::string_view name, std::string_view origin) {
   }
   for (const auto& [key, text] : preset->overrides) set(key, text, "preset '" + preset->name + "'");
   preset_ = preset->name;
+  preset_origin_ = std::string(origin);
 }
 
 void Config::apply_yaml(std::string_view yaml_text, std::string_view origin, bool skip_preset_key) {
@@ -479,6 +480,7 @@ void Config::apply_yaml(std::string_view yaml_text, std::string_view origin, boo
           items.push_back(element.Scalar());
         }
         values_[spec->key] = parse_list_items(*spec, items, where);
+        origins_[spec->key] = where;
         continue;
       }
       set(name, value.Scalar(), where);
@@ -491,6 +493,12 @@ void Config::set(std::string_view key, std::string_view text, std::string_view o
   const KeySpec* spec = schema_->find(key);
   if (spec == nullptr) fail(origin, key, unknown_key_message(*schema_, key));
   values_[spec->key] = parse_text(*spec, std::string(text), origin);
+  origins_[spec->key] = std::string(origin);
+}
+
+std::string Config::origin(std::string_view key) const {
+  const auto it = origins_.find(key);
+  return it == origins_.end() ? std::string() : it->second;
 }
 
 void Config::apply_override(std::string_view assignment) {

@@ -57,6 +57,23 @@ TEST(Config, DefaultsPresetFileAndOverridesApplyInOrder) {
   EXPECT_EQ(config.get<bool>("train.async"), false);
 }
 
+TEST(Config, EveryValueKnowsWhereItCameFrom) {
+  const Schema schema = toy_schema();
+  const Config defaults = Config::resolve(schema, {});
+  EXPECT_EQ(defaults.origin("replay.capacity"), "");
+  EXPECT_EQ(defaults.preset_origin(), "");
+
+  const Config config =
+      Config::resolve_text(schema, "train:\n  batch_size: 8\nenv.densities: [5]\n", "run.yaml",
+                           {.overrides = {"preset=toy", "agent.method=icm"}});
+  EXPECT_EQ(config.preset_origin(), "--set preset=toy");
+  EXPECT_EQ(config.origin("replay.capacity"), "preset 'toy'");
+  EXPECT_EQ(config.origin("train.batch_size"), "run.yaml line 2");
+  EXPECT_EQ(config.origin("env.densities"), "run.yaml line 3");
+  EXPECT_EQ(config.origin("agent.method"), "--set agent.method=icm");
+  EXPECT_EQ(config.origin("train.async"), "") << "a default has no origin";
+}
+
 TEST(Config, PresetCanBeNamedInTheFile) {
   const Schema schema = toy_schema();
   const Config config =

@@ -4,7 +4,8 @@
 //
 // Policy sources (eval.policy, or indrive-actor --policy):
 //   snapshot  the learner's snapshot over DDS (by default its last one, once the learner reports
-//             done), or a snapshot file (eval.snapshot_file / --snapshot FILE) without DDS.
+//             done), or a snapshot file (eval.snapshot_file / --snapshot FILE) without DDS,
+//             whose header sizes the model and camera unless the config chose the sizes.
 //             Zero-shot runs the exploration actor, few-shot the task actor (eval.head).
 //   oracle    the route follower with the 9 actions; eval.oracle_brake coasts behind a leader.
 //   random    uniform actions.

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -57,8 +58,14 @@ class ServiceConfig {
 
   // The agent's configuration (preset sizes plus every agent.* key).
   agent::AgentConfig agent() const;
+  // The agent keys this configuration chose (a preset, a config file, --set), each with where
+  // it was chosen: "preset" -> "--set preset=tiny", "world_model.deter" -> "preset 'tiny'" or
+  // "--set agent.world_model.deter=64". Keys left at the defaults are not in it.
+  std::map<std::string, std::string> agent_choices() const;
   // The environment of a training actor: image size of the preset, the task in task phases.
   env::EnvConfig env() const;
+  // The same for another agent configuration (an evaluator's, sized by its snapshot file).
+  env::EnvConfig env(const agent::AgentConfig& agent) const;
   // The wire phase of the agent's phase.
   msg::Phase wire_phase() const;
 

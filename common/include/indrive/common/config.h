@@ -135,6 +135,12 @@ class Config {
 
   // The preset that was applied ("" when none).
   const std::string& preset() const { return preset_; }
+  // Where the preset's name came from ("--set preset=tiny", "config file f line 1"); "" when
+  // none was applied.
+  const std::string& preset_origin() const { return preset_origin_; }
+  // Where the value of `key` came from: "preset 'tiny'", "config file f line 3", "--set k=v" or
+  // the origin given to set(); "" while it holds the schema default.
+  std::string origin(std::string_view key) const;
   // The resolved configuration as nested YAML (keys sorted), readable by resolve().
   std::string to_yaml() const;
   // Writes to_yaml() to `path`; throws ConfigError when the file cannot be written.
@@ -154,7 +160,10 @@ class Config {
 
   const Schema* schema_;
   std::string preset_;
+  std::string preset_origin_;
   std::map<std::string, Value, std::less<>> values_;
+  // Origin of every value set after the defaults (not compared: it says how, not what).
+  std::map<std::string, std::string, std::less<>> origins_;
 };
 
 // The configuration flags every executable shares, parsed from argv.
