@@ -159,6 +159,25 @@ TEST_P(BuiltInRouteTest, TrackerCountsEveryWaypointOnceAndFinishes) {
   EXPECT_EQ(passed, expected);
 }
 
+// The shipped loops turn as their route files say; going straight through a T-junction is
+// kStraight, no turn. town01's right_loop goes straight through M2 as `straight` does.
+TEST(BuiltInRouteTurnsTest, LoopsTurnAsTheRouteFilesSay) {
+  using T = TurnDirection;
+  auto turns = [](const std::string& town, const std::string& name) {
+    return find_route(testing::cached_town(town).routes, name).turns();
+  };
+  const T r = T::kRight;
+  const T l = T::kLeft;
+  const T s = T::kStraight;
+  EXPECT_EQ(turns("town01", "right_loop"), (std::vector<T>{r, r, r, s, r}));
+  EXPECT_EQ(turns("town01", "left_loop"), (std::vector<T>{s, l, l, l, l}));
+  EXPECT_EQ(turns("town02", "two_turn"), (std::vector<T>{r, l, s, r, s, r}));
+  for (const std::string town : {"town01", "town02"}) {
+    for (T turn : turns(town, "right_loop")) EXPECT_TRUE(turn == r || turn == s) << town;
+    for (T turn : turns(town, "left_loop")) EXPECT_TRUE(turn == l || turn == s) << town;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Towns, BuiltInRouteTest, ::testing::ValuesIn(all_cases()), case_name);
 
 class HandRouteTest : public ::testing::Test {

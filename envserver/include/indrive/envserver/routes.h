@@ -155,4 +155,22 @@ std::vector<Route> build_routes(const RoadNetwork& net, const std::vector<RouteS
 // Returns the route called `name`; throws RouteError listing the known names otherwise.
 const Route& find_route(const std::vector<Route>& routes, std::string_view name);
 
+// Two routes of a town that leave the same approach by different exits. The policy sees no
+// route, only the camera, so on such an approach it cannot know which exit to take: the
+// success rates of the two routes could not both reach 100 %.
+struct RouteConflict {
+  std::string approach;  // the incoming normal edge
+  std::string route_a;   // the route met first (in spec order) ...
+  std::string exit_a;    // ... and the edge it leaves the approach by
+  std::string route_b;   // a later route (or route_a again, further on) ...
+  std::string exit_b;    // ... leaving by another edge
+  std::string message;   // one line naming all of the above
+};
+// The conflicts of a set of routes. An approach is a consecutive edge pair (in -> out) of a
+// route, a loop's closing pair (last -> first) included; the set is conflict-free when no
+// incoming edge is left by two different exits across all routes. Each (approach, exit)
+// clash is reported once, against the first exit seen.
+std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs);
+std::vector<RouteConflict> route_conflicts(const std::vector<Route>& routes);
+
 }  // namespace indrive::env
