@@ -169,6 +169,10 @@ TEST(EvalPolicy, ProtocolRecordSucceedsOnlyAtTheDestinationWithoutFailures) {
   const EpisodeRecord timed_out = protocol_record(spec, env::kTimeLimit, 3245, 0.4, 0.0);
   EXPECT_FALSE(timed_out.success);
   EXPECT_EQ(timed_out.failure_reason, env::event_names(env::kTimeLimit));
+  // Leaving the route is a failure of its own.
+  const EpisodeRecord strayed = protocol_record(spec, env::kOffRoute, 300, 0.2, 0.0);
+  EXPECT_FALSE(strayed.success);
+  EXPECT_EQ(strayed.failure_reason, "off_route");
 }
 
 TEST(EvalPolicy, LeaderAheadSeesOnlyVehiclesOnTheRouteInFront) {
