@@ -16,7 +16,8 @@
 //                    does not take), or farther than the lane's width plus off_route_margin_m
 //                    from the route's centre line; never without a route (pretraining)
 //   stall            speed under 1 km/h for 60 s in a row
-//   destination      the route's end reached or its loop completed (from the route tracker)
+//   destination      within kDestinationRadiusM (10 m) of a point-to-point route's terminal
+//                    waypoint, or the loop's lap completed (from the route tracker)
 //   time_limit       the episode reached its step limit (EventConfig::time_limit_steps; the
 //                    evaluator sets a per-route budget instead, 5 steps per metre of route)
 //
