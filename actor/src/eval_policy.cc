@@ -534,6 +534,12 @@ int route_step_budget(double length_m, double speed_mps, double slack, double dt
   return std::max(1, static_cast<int>(std::ceil(slack * length_m / (speed_mps * dt_s) - 1e-9)));
 }
 
+double route_completion(double progress_m, double length_m, std::uint32_t events) {
+  if ((events & env::kDestination) != 0) return 1.0;
+  if (length_m <= 0.0) return 0.0;
+  return std::clamp(progress_m / length_m, 0.0, 1.0);
+}
+
 env::EnvConfig protocol_env_config(env::EnvConfig config) {
   config.events.time_limit_steps = std::numeric_limits<int>::max() / 2;
   return config;

@@ -277,7 +277,7 @@ struct Evaluator::Impl {
     if (budget_ran_out) outcome.events |= env::kTimeLimit;
     outcome.steps = step.step;
     outcome.route_completion =
-        route->length_m() <= 0.0 ? 0.0 : std::min(1.0, step.route_progress_m / route->length_m());
+        route_completion(step.route_progress_m, route->length_m(), outcome.events);
     if (video) video->finish(outcome.events, budget_ran_out);
     return outcome;
   }

@@ -15,8 +15,10 @@ namespace {
 
 const std::vector<std::string> kPaperRouteOrder = {"straight", "right_loop", "left_loop",
                                                    "two_turn"};
+// Every failure event of envserver/events.h (event_name), in bit order.
 const std::vector<std::string> kFailureOrder = {"collision", "lane_invasion", "wrong_direction",
-                                                "off_road",  "stall",         "time_limit"};
+                                                "off_road",  "stall",         "time_limit",
+                                                "off_route"};
 
 // Two-sided 97.5% quantile of Student's t for `dof` degrees of freedom.
 double t_quantile_975(int dof) {

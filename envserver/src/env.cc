@@ -99,7 +99,7 @@ StepResult Env::reset(const ResetOptions& options) {
   traffic_->reset(options.density, options.traffic_seed, ego_.pose);
   sumo_->step();  // inserts the ego and the first traffic
   read_vehicles();
-  events_->reset();
+  events_->reset(route_);  // off_route only on a route
   step_ = 0;
   running_ = true;
   render();
@@ -137,6 +137,7 @@ StepResult Env::step(int action) {
                                    .others = boxes_,
                                    .sumo_collision = sumo_collision,
                                    .route_finished = progress.finished,
+                                   .route_distance_m = progress.distance_to_route_m,
                                    .step = step_});
   if (events_->sumo_only_collision()) {
     INDRIVE_LOG(kDebug, "env") << "step " << step_

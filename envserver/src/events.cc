@@ -51,6 +51,8 @@ const char* event_name(EventBit bit) {
       return "destination";
     case kTimeLimit:
       return "time_limit";
+    case kOffRoute:
+      return "off_route";
   }
   return "unknown";
 }
@@ -92,8 +94,17 @@ EventDetector::EventDetector(const RoadNetwork& net, const EventConfig& config,
   INDRIVE_CHECK(config.time_limit_steps > 0) << "time limit must be positive";
 }
 
-void EventDetector::reset() {
+void EventDetector::reset(const Route* route) {
   slow_steps_ = 0;
+  route_ = route;
+  route_edges_.assign(route != nullptr ? net_->edges().size() : 0, false);
+  if (route != nullptr) {
+    for (int lane : route->lanes()) {
+      INDRIVE_CHECK(lane >= 0 && lane < static_cast<int>(net_->lanes().size()))
+          << "route '" << route->name() << "' is not of this network";
+      route_edges_[net_->lane(lane).edge] = true;
+    }
+  }
   road_ = RoadStatus{};
   sumo_only_collision_ = false;
 }
@@ -138,6 +149,16 @@ std::uint32_t EventDetector::update(const Inputs& in) {
     if (std::abs(road_.heading_error_rad) >
         config_.wrong_direction_deg * std::numbers::pi / 180.0) {
       bits |= kWrongDirection;
+    }
+    // Off the route: on an edge the route does not drive (a lane change within a route edge
+    // is not), or too far from its centre line. Internal lanes and junctions are exempt, so
+    // the crossing itself never fires; the first lane after a wrong turn does.
+    if (route_ != nullptr) {
+      const Lane& lane = net_->lane(road_.lane);
+      if (!route_edges_[lane.edge] ||
+          in.route_distance_m > lane.width_m + config_.off_route_margin_m) {
+        bits |= kOffRoute;
+      }
     }
   }
 

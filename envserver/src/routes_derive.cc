@@ -1,6 +1,7 @@
 // Derivation of the four standard routes from any road network.
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <queue>
 #include <set>
@@ -56,43 +57,57 @@ EdgeGraph make_graph(const RoadNetwork& net) {
   return graph;
 }
 
-// Longest chain of straight moves over edges that are themselves straight (no curve).
-std::vector<int> longest_straight(const RoadNetwork& net, const EdgeGraph& graph) {
+// A candidate route: its edges and its length.
+struct Candidate {
+  std::vector<int> edges;
+  double length_m = 0.0;
+};
+
+// Chains of straight moves over edges that are themselves straight (no curve), one per start
+// edge, longest first.
+std::vector<Candidate> straight_candidates(const RoadNetwork& net, const EdgeGraph& graph) {
   constexpr double kMaxBendRad = 15.0 * M_PI / 180.0;
-  std::vector<int> best;
-  double best_length = 0.0;
+  std::vector<Candidate> candidates;
   for (int start = 0; start < static_cast<int>(graph.moves.size()); ++start) {
-    if (net.edge(start).internal || graph.bend_rad[start] > kMaxBendRad) continue;
+    if (net.edge(start).internal || net.edge(start).lanes.empty() ||
+        graph.bend_rad[start] > kMaxBendRad) {
+      continue;
+    }
     std::vector<int> chain = {start};
     std::set<int> seen = {start};
     double length = graph.length_m[start];
     for (;;) {
       int next = -1;
+      double step = 0.0;
       for (const Move& move : graph.moves[chain.back()]) {
         if (move.direction == TurnDirection::kStraight && graph.bend_rad[move.to] <= kMaxBendRad) {
           next = move.to;
-          length += move.length_m;
+          step = move.length_m;
           break;
         }
       }
       if (next < 0 || !seen.insert(next).second) break;
       chain.push_back(next);
+      length += step;
     }
-    if (length > best_length + 1e-6) {
-      best_length = length;
-      best = chain;
-    }
+    candidates.push_back({std::move(chain), length});
   }
-  return best;
+  // Longest first; ties keep the edge order (stable), so derivation is deterministic.
+  std::stable_sort(
+      candidates.begin(), candidates.end(),
+      [](const Candidate& a, const Candidate& b) { return a.length_m > b.length_m + 1e-6; });
+  return candidates;
 }
 
-// Shortest simple cycle using only `allowed` turns and, when required_mask is set, at least one
-// right (bit 1) and one left (bit 2) turn. Dijkstra over (edge, turns-seen) from every edge.
-std::vector<int> shortest_loop(const RoadNetwork& net, const EdgeGraph& graph, bool allow_right,
-                               bool allow_left, int required_mask) {
+// Shortest simple cycles using only `allowed` turns and, when required_mask is set, at least
+// one right (bit 1) and one left (bit 2) turn: Dijkstra over (edge, turns-seen) from every
+// edge gives the shortest such cycle through it. Distinct cycles, shortest first, each rotated
+// to start on its longest edge, so a vehicle has a run-up before the first turn.
+std::vector<Candidate> loop_candidates(const RoadNetwork& net, const EdgeGraph& graph,
+                                       bool allow_right, bool allow_left, int required_mask) {
   const int n = static_cast<int>(graph.moves.size());
-  std::vector<int> best;
-  double best_length = std::numeric_limits<double>::infinity();
+  std::vector<Candidate> candidates;
+  std::set<std::vector<int>> found;  // cycles as sorted edge lists, to drop rotations
   for (int start = 0; start < n; ++start) {
     if (net.edge(start).internal || graph.moves[start].empty()) continue;
     const int states = n * 4;
@@ -106,7 +121,7 @@ std::vector<int> shortest_loop(const RoadNetwork& net, const EdgeGraph& graph, b
     while (!queue.empty()) {
       const auto [d, state] = queue.top();
       queue.pop();
-      if (d > dist[state] || d >= best_length) continue;
+      if (d > dist[state]) continue;
       const int edge = state / 4;
       const int mask = state % 4;
       if (edge == start && state != start * 4) {
@@ -140,19 +155,19 @@ std::vector<int> shortest_loop(const RoadNetwork& net, const EdgeGraph& graph, b
       cycle.push_back(state / 4);
     }
     std::reverse(cycle.begin(), cycle.end());
-    const std::set<int> unique(cycle.begin(), cycle.end());
-    if (unique.size() != cycle.size()) continue;  // not a simple loop
-    best_length = dist[goal];
-    best = cycle;
-  }
-  // Start on the longest edge, so a vehicle has a run-up before the first turn.
-  if (!best.empty()) {
-    auto longest = std::max_element(best.begin(), best.end(), [&](int a, int b) {
+    std::vector<int> sorted = cycle;
+    std::sort(sorted.begin(), sorted.end());
+    if (std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end()) continue;  // not simple
+    if (!found.insert(sorted).second) continue;  // the same cycle from another start
+    auto longest = std::max_element(cycle.begin(), cycle.end(), [&](int a, int b) {
       return graph.length_m[a] < graph.length_m[b];
     });
-    std::rotate(best.begin(), longest, best.end());
+    std::rotate(cycle.begin(), longest, cycle.end());
+    candidates.push_back({std::move(cycle), dist[goal]});
   }
-  return best;
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.length_m < b.length_m; });
+  return candidates;
 }
 
 RouteSpec to_spec(const RoadNetwork& net, std::string name, bool loop,
@@ -166,22 +181,44 @@ RouteSpec to_spec(const RoadNetwork& net, std::string name, bool loop,
 
 std::vector<RouteSpec> derive_routes(const RoadNetwork& net) {
   const EdgeGraph graph = make_graph(net);
-  const std::vector<int> straight = longest_straight(net, graph);
-  const std::vector<int> right = shortest_loop(net, graph, true, false, 0);
-  const std::vector<int> left = shortest_loop(net, graph, false, true, 0);
-  const std::vector<int> mixed = shortest_loop(net, graph, true, true, 3);
+  const std::vector<std::vector<Candidate>> candidates = {
+      straight_candidates(net, graph), loop_candidates(net, graph, true, false, 0),
+      loop_candidates(net, graph, false, true, 0), loop_candidates(net, graph, true, true, 3)};
   std::string missing;
-  if (straight.empty()) missing += " straight";
-  if (right.empty()) missing += " right_loop";
-  if (left.empty()) missing += " left_loop";
-  if (mixed.empty()) missing += " two_turn";
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    if (candidates[k].empty()) missing += " " + std::string(kRouteNames[k]);
+  }
   if (!missing.empty()) {
     throw RouteError("network '" + net.source().string() + "' allows no route for:" + missing +
                      "; use a network with closed blocks (loops need a ring of junctions) or "
                      "write a route file");
   }
-  return {to_spec(net, "straight", false, straight), to_spec(net, "right_loop", true, right),
-          to_spec(net, "left_loop", true, left), to_spec(net, "two_turn", true, mixed)};
+  // The first conflict-free set in rank order: the best straight corridor (longest) and loops
+  // (shortest) that allow conflict-free choices of the later kinds, found by a depth-first
+  // search over the candidates, kind by kind, with a bounded number of checks. When none is
+  // found the best candidate of each kind is kept and route_conflicts() reports the clashes.
+  const auto spec_of = [&](size_t kind, const Candidate& candidate) {
+    return to_spec(net, std::string(kRouteNames[kind]), kind > 0, candidate.edges);
+  };
+  constexpr int kMaxChecks = 20000;
+  int checks = 0;
+  std::vector<RouteSpec> chosen;
+  const std::function<bool(size_t)> search = [&](size_t kind) {
+    if (kind == candidates.size()) return true;
+    for (const Candidate& candidate : candidates[kind]) {
+      if (++checks > kMaxChecks) return false;
+      chosen.push_back(spec_of(kind, candidate));
+      if (route_conflicts(chosen).empty() && search(kind + 1)) return true;
+      chosen.pop_back();
+    }
+    return false;
+  };
+  if (search(0)) return chosen;
+  chosen.clear();
+  for (size_t kind = 0; kind < candidates.size(); ++kind) {
+    chosen.push_back(spec_of(kind, candidates[kind].front()));
+  }
+  return chosen;
 }
 
 }  // namespace indrive::env

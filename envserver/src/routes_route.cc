@@ -91,6 +91,25 @@ Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : 
   if (spec.loop) lanes_.pop_back();
   INDRIVE_CHECK(line_.size() >= 2) << "route '" << spec.name << "' has a degenerate centre line";
   line_s_m_ = geometry::arc_lengths(line_);
+  if (!spec.loop) {
+    // The terminal waypoint is set back from the end of the last edge (its junction's stop
+    // line), by kRouteEndSetbackM or half that edge when it is shorter. The last edge's points
+    // follow the one it shares with the lane before (kept once, under that lane).
+    size_t first = line_.size() - 1;
+    while (first > 0 && line_lane_[first - 1] == lanes_.back()) --first;
+    const double last_edge_m = line_s_m_.back() - line_s_m_[first > 0 ? first - 1 : 0];
+    const double end_s = line_s_m_.back() - std::min(kRouteEndSetbackM, 0.5 * last_edge_m);
+    const Eigen::Vector2d end = geometry::point_at(line_, line_s_m_, end_s, nullptr);
+    const size_t keep = std::max<size_t>(
+        1, std::upper_bound(line_s_m_.begin(), line_s_m_.end(), end_s - 1e-6) - line_s_m_.begin());
+    line_.resize(keep);
+    line_width_m_.resize(keep);
+    line_lane_.resize(keep);
+    line_.push_back(end);
+    line_width_m_.push_back(line_width_m_.back());
+    line_lane_.push_back(line_lane_.back());
+    line_s_m_ = geometry::arc_lengths(line_);
+  }
   length_m_ = line_s_m_.back();
 
   // Waypoints evenly spread at about spacing_m; a loop does not repeat its start.
@@ -189,8 +208,8 @@ namespace {
 constexpr double kTrackWindowM = 15.0;
 }  // namespace
 
-RouteTracker::RouteTracker(const Route& route, double finish_tolerance_m)
-    : route_(&route), finish_tolerance_m_(finish_tolerance_m) {
+RouteTracker::RouteTracker(const Route& route, double destination_radius_m)
+    : route_(&route), destination_radius_m_(destination_radius_m) {
   reset();
 }
 
@@ -245,9 +264,14 @@ RouteStep RouteTracker::update(const Pose2& pose) {
   step.next_waypoint = route.next_waypoint(s_m_);
   step.lateral_m = at.lateral_m;
   step.distance_to_route_m = std::abs(at.lateral_m);
-  const double remaining = route.is_loop() ? route.length_m() - progress_m_
-                                           : route.length_m() - (start_s_m_ + progress_m_);
-  step.finished = remaining <= finish_tolerance_m_;
+  if (route.is_loop()) {
+    step.finished = route.length_m() - progress_m_ <= kLapToleranceM;
+  } else {
+    const Eigen::Vector2d end = route.waypoints().back().position;
+    const double remaining = route.length_m() - (start_s_m_ + progress_m_);
+    step.finished = remaining <= destination_radius_m_ &&
+                    (Eigen::Vector2d(pose.x_m, pose.y_m) - end).norm() <= destination_radius_m_;
+  }
   last_ = step;
   return step;
 }

@@ -418,7 +418,7 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
     const std::uint32_t events = step.is_last ? step.events : step.events | env::kTimeLimit;
     if (video) video->finish(events, !step.is_last);
     const double completion =
-        driven->length_m() <= 0.0 ? 0.0 : std::min(1.0, step.route_progress_m / driven->length_m());
+        actor::route_completion(step.route_progress_m, driven->length_m(), events);
     EpisodeRecord record =
         actor::protocol_record(spec, events, step.step, completion, episode_return);
     record.run_id = config.run_id();

@@ -371,6 +371,15 @@ TEST(EvalPolicy, StepBudgetIsFiveStepsPerMetreByDefault) {
   EXPECT_GT(route_step_budget(649.0), 649.0 / (5.0 * 0.1) * 2.0);
 }
 
+TEST(EvalPolicy, RouteCompletionIsWholeAtTheDestination) {
+  // The destination fires within 10 m of the terminal waypoint: that is the whole route.
+  EXPECT_DOUBLE_EQ(route_completion(275.0, 283.0, env::kDestination), 1.0);
+  EXPECT_DOUBLE_EQ(route_completion(141.5, 283.0, env::kOffRoute), 0.5);
+  EXPECT_DOUBLE_EQ(route_completion(-3.0, 283.0, env::kCollision), 0.0);
+  EXPECT_DOUBLE_EQ(route_completion(700.0, 649.0, env::kTimeLimit), 1.0);
+  EXPECT_DOUBLE_EQ(route_completion(5.0, 0.0, env::kStall), 0.0);
+}
+
 TEST(EvalPolicy, ProtocolRecordSucceedsOnlyAtTheDestinationWithoutFailures) {
   const EpisodeSpec spec{.town = "town02",
                          .route = "two_turn",
@@ -398,6 +407,10 @@ TEST(EvalPolicy, ProtocolRecordSucceedsOnlyAtTheDestinationWithoutFailures) {
   const EpisodeRecord timed_out = protocol_record(spec, env::kTimeLimit, 3245, 0.4, 0.0);
   EXPECT_FALSE(timed_out.success);
   EXPECT_EQ(timed_out.failure_reason, env::event_names(env::kTimeLimit));
+  // Leaving the route is a failure of its own.
+  const EpisodeRecord strayed = protocol_record(spec, env::kOffRoute, 300, 0.2, 0.0);
+  EXPECT_FALSE(strayed.success);
+  EXPECT_EQ(strayed.failure_reason, "off_route");
 }
 
 TEST(EvalPolicy, LeaderAheadSeesOnlyVehiclesOnTheRouteInFront) {

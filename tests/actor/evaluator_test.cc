@@ -118,7 +118,7 @@ TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
     EXPECT_EQ(row.success, success);
     EXPECT_EQ(row.failure_reason, success ? "" : env::event_names(failures));
     EXPECT_EQ(row.steps, r.steps);
-    EXPECT_NEAR(row.route_completion, std::min(1.0, r.progress_m / r.length_m), 1e-6);
+    EXPECT_NEAR(row.route_completion, route_completion(r.progress_m, r.length_m, r.events), 1e-6);
     EXPECT_LE(row.steps, route_step_budget(r.length_m));
     if (row.success) {
       EXPECT_GT(row.route_completion, 0.95);

@@ -83,6 +83,18 @@ TEST(Report, RoutesInPaperOrderAveragesAndTheGeneralisationGap) {
   EXPECT_NE(render_latex(report).find("\\multicolumn{2}{c}{two\\_turn}"), std::string::npos);
 }
 
+TEST(Report, FailureColumnsFollowTheEventOrderOffRouteIncluded) {
+  std::vector<EpisodeRecord> records;
+  add_episodes(records, "icm", 0, "town01", "right_loop", 10, 3, 0, "off_route");
+  add_episodes(records, "icm", 0, "town01", "left_loop", 10, 2, 0, "time_limit");
+  add_episodes(records, "icm", 0, "town01", "straight", 10, 1, 0, "collision");
+  const std::string md = render_markdown(aggregate(records), "town01", "town02");
+  EXPECT_NE(md.find("| method | town | route | collision | time_limit | off_route |"),
+            std::string::npos)
+      << md;
+  EXPECT_NE(md.find("| icm | town01 | right_loop | 0 | 0 | 3 |"), std::string::npos) << md;
+}
+
 TEST(Report, EmptyInputsAreClearErrors) {
   testing::TempDir dir;
   EXPECT_THROW(aggregate({}), std::invalid_argument);

@@ -114,6 +114,23 @@ TEST(Env, CirclingLeftLeavesTheLane) {
   EXPECT_LT(r.step, 100);
 }
 
+TEST(Env, TakingATurnTheRouteDoesNotTakeEndsTheEpisodeAsOffRoute) {
+  Env& env = shared_env();
+  // left_loop runs south on N1_M2, M2_M1 and turns left at M1; the follower drives a route
+  // that goes straight on there, to M1_B1.
+  StepResult r = env.reset({.route = "left_loop", .density = 0});
+  const Route wrong(env.town().net, RouteSpec{"wrong", false, {"N1_M2", "M2_M1", "M1_B1"}});
+  WaypointFollower follower(wrong, env.config().ego, {.target_speed_mps = 5.0});
+  follower.reset();
+  while (!r.is_last) r = env.step(follower.act(env.ego()));
+  EXPECT_EQ(r.events, kOffRoute) << event_names(r.events);
+  EXPECT_EQ(event_names(r.events), "off_route");
+  EXPECT_TRUE(r.is_terminal);
+  const RoadStatus& road = env.events().road();
+  ASSERT_GE(road.lane, 0);
+  EXPECT_EQ(env.town().net.edge(env.town().net.lane(road.lane).edge).id, "M1_B1");
+}
+
 TEST(Env, RewardOnlyInTaskPhases) {
   Env& env = shared_env();
   StepResult r = env.reset({.route = "straight", .density = 0});

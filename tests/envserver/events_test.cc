@@ -42,6 +42,14 @@ TEST(EventNames, JoinSetBits) {
   EXPECT_FALSE(is_terminal(kTimeLimit));
   EXPECT_TRUE(is_failure(kTimeLimit));
   EXPECT_TRUE(is_terminal(kTimeLimit | kCollision));
+  EXPECT_EQ(event_names(kOffRoad | kOffRoute), "off_road+off_route");
+  EXPECT_TRUE(is_failure(kOffRoute));
+  EXPECT_TRUE(is_terminal(kOffRoute));
+  // Every bit below kNumEvents has a name.
+  for (int i = 0; i < kNumEvents; ++i) {
+    EXPECT_STRNE(event_name(static_cast<EventBit>(1u << i)), "unknown") << i;
+  }
+  EXPECT_STREQ(event_name(static_cast<EventBit>(1u << kNumEvents)), "unknown");
 }
 
 // The T-junction test network: eastbound lane "we_0" centre at y = -1.75 from x ~ 0 to the
@@ -143,6 +151,71 @@ TEST_F(EventDetectorTest, DestinationAndTimeLimit) {
             kDestination);
   EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, {}, 999), 0u);
   EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, {}, 1000), kTimeLimit);
+}
+
+// Off the route: the route "north" turns left at the junction (we -> cn).
+class OffRouteTest : public EventDetectorTest {
+ protected:
+  void SetUp() override {
+    EventDetectorTest::SetUp();
+    route_ = std::make_unique<Route>(*net_, RouteSpec{"north", false, {"we", "cn"}});
+    tracker_ = std::make_unique<RouteTracker>(*route_);
+  }
+  // One step at `pose`, the route tracker's distance passed on as the env does.
+  std::uint32_t drive(const Pose2& pose) {
+    const RouteStep at = tracker_->update(pose);
+    return detector_->update({.ego = {.pose = pose, .speed_mps = 5.0},
+                              .route_distance_m = at.distance_to_route_m,
+                              .step = ++step_});
+  }
+  std::unique_ptr<Route> route_;
+  std::unique_ptr<RouteTracker> tracker_;
+  int step_ = 0;
+};
+
+TEST_F(OffRouteTest, StayingOnTheRouteThroughItsTurnNeverFires) {
+  detector_->reset(route_.get());
+  int junction_steps = 0;
+  for (double s = 0.0; s <= route_->length_m(); s += 0.5) {
+    ASSERT_EQ(drive(route_->pose_at(s)), 0u) << "at s = " << s;
+    junction_steps += detector_->road().in_junction;
+  }
+  EXPECT_GT(junction_steps, 10);  // the left turn on the junction's internal lanes
+}
+
+TEST_F(OffRouteTest, GoingStraightWhereTheRouteTurnsFiresOnTheFirstLaneAfter) {
+  detector_->reset(route_.get());
+  double fired_at = -1.0;
+  // From the route's start (the tracker follows the ego step by step, as in the env).
+  for (double x = route_->start_pose().x_m; x < 220.0; x += 0.5) {
+    const std::uint32_t bits = drive({x, -1.75, 0.0});
+    if (bits == 0) continue;
+    EXPECT_EQ(bits, kOffRoute) << event_names(bits) << " at x = " << x;
+    EXPECT_FALSE(detector_->road().in_junction);
+    EXPECT_EQ(net_->edge(net_->lane(detector_->road().lane).edge).id, "ce");
+    fired_at = x;
+    break;
+  }
+  EXPECT_GT(fired_at, 150.0);  // not before the junction ...
+  EXPECT_LT(fired_at, 165.0);  // ... but at once after it
+}
+
+TEST_F(OffRouteTest, WithoutARouteItNeverFires) {
+  detector_->reset();  // pretraining: random spawn, no route
+  for (double x = 100.0; x < 220.0; x += 0.5) {
+    ASSERT_EQ(check({x, -1.75, 0.0}), 0u) << "at x = " << x;
+  }
+}
+
+TEST_F(OffRouteTest, FartherThanALaneWidthPlusMarginFromTheRouteFires) {
+  detector_->reset(route_.get());
+  const Pose2 on{60.0, -1.75, 0.0};
+  auto at_distance = [&](double d) {
+    return detector_->update(
+        {.ego = {.pose = on, .speed_mps = 5.0}, .route_distance_m = d, .step = 1});
+  };
+  EXPECT_EQ(at_distance(3.5 + 0.9), 0u);  // lane width 3.5 m + margin 1 m
+  EXPECT_EQ(at_distance(3.5 + 1.1), kOffRoute);
 }
 
 }  // namespace

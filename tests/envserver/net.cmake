@@ -2,7 +2,7 @@
 indrive_test(envserver_net_test
   SOURCES net_parse_test.cc net_query_test.cc net_town_test.cc reward_test.cc
           routes_route_test.cc routes_derive_test.cc routes_file_test.cc
-          scene_build_test.cc net_draw_test.cc routes_feasibility_test.cc
+          routes_conflicts_test.cc scene_build_test.cc net_draw_test.cc routes_feasibility_test.cc
   LIBS indrive::envserver
   LABEL unit TIMEOUT 120)
 # The geometry helpers are private to the library; the tests use them to measure curvature.

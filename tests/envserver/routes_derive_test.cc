@@ -47,6 +47,31 @@ TEST(RoutesDeriveTest, FindsTheSmallestBlockLoopsAndTheLongestCorridor) {
   }
 }
 
+TEST(RoutesDeriveTest, PrefersConflictFreeSets) {
+  // On town02 the shortest mixed loop leaves E2_M4 to M4_M3 where right_loop leaves it to
+  // M4_N2; derivation takes the next candidate that keeps the set conflict-free.
+  for (const std::string town : {"town01", "town02", "grid:3"}) {
+    const RoadNetwork& net = testing::cached_town(town).net;
+    const std::vector<RouteSpec> specs = derive_routes(net);
+    ASSERT_EQ(specs.size(), 4u) << town;
+    for (const RouteConflict& conflict : route_conflicts(specs)) {
+      ADD_FAILURE() << town << ": " << conflict.message;
+    }
+    // Still valid routes of their kinds.
+    const std::vector<Route> routes = build_routes(net, specs);
+    for (TurnDirection turn : routes[0].turns()) EXPECT_EQ(turn, TurnDirection::kStraight);
+    for (TurnDirection turn : routes[1].turns()) EXPECT_FALSE(is_left_turn(turn)) << town;
+    for (TurnDirection turn : routes[2].turns()) EXPECT_FALSE(is_right_turn(turn)) << town;
+    bool right = false;
+    bool left = false;
+    for (TurnDirection turn : routes[3].turns()) {
+      right |= is_right_turn(turn);
+      left |= is_left_turn(turn);
+    }
+    EXPECT_TRUE(right && left) << town;
+  }
+}
+
 TEST(RoutesDeriveTest, NetworkWithoutLoopsNamesWhatIsMissing) {
   const RoadNetwork net = RoadNetwork::parse(testing::kHandNetwork, "hand");
   try {

@@ -147,7 +147,8 @@ TEST_P(BuiltInRouteTest, TrackerCountsEveryWaypointOnceAndFinishes) {
     step = tracker.update(pose);
     EXPECT_GE(step.waypoints_passed, 0);
     passed += step.waypoints_passed;
-    if (step.finished && s < r.length_m() - 3.5) finished_early = true;
+    const double radius = r.is_loop() ? kLapToleranceM : kDestinationRadiusM;
+    if (step.finished && s < r.length_m() - radius - 0.5) finished_early = true;
     EXPECT_NEAR(step.lateral_m, 0.4, 0.05) << "s = " << s;
   }
   EXPECT_FALSE(finished_early);
@@ -157,6 +158,25 @@ TEST_P(BuiltInRouteTest, TrackerCountsEveryWaypointOnceAndFinishes) {
   // first, where it starts.
   const int expected = static_cast<int>(r.waypoints().size()) - (r.is_loop() ? 0 : 1);
   EXPECT_EQ(passed, expected);
+}
+
+// The shipped loops turn as their route files say; going straight through a T-junction is
+// kStraight, no turn. town01's right_loop goes straight through M2 as `straight` does.
+TEST(BuiltInRouteTurnsTest, LoopsTurnAsTheRouteFilesSay) {
+  using T = TurnDirection;
+  auto turns = [](const std::string& town, const std::string& name) {
+    return find_route(testing::cached_town(town).routes, name).turns();
+  };
+  const T r = T::kRight;
+  const T l = T::kLeft;
+  const T s = T::kStraight;
+  EXPECT_EQ(turns("town01", "right_loop"), (std::vector<T>{r, r, r, s, r}));
+  EXPECT_EQ(turns("town01", "left_loop"), (std::vector<T>{s, l, l, l, l}));
+  EXPECT_EQ(turns("town02", "two_turn"), (std::vector<T>{r, l, s, r, s, r}));
+  for (const std::string town : {"town01", "town02"}) {
+    for (T turn : turns(town, "right_loop")) EXPECT_TRUE(turn == r || turn == s) << town;
+    for (T turn : turns(town, "left_loop")) EXPECT_TRUE(turn == l || turn == s) << town;
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Towns, BuiltInRouteTest, ::testing::ValuesIn(all_cases()), case_name);
@@ -172,10 +192,12 @@ TEST_F(HandRouteTest, RouteThroughAJunction) {
   EXPECT_EQ(route.lanes(), (std::vector<int>{net_.find_lane("ab_0"), net_.find_lane(":b_0_0"),
                                              net_.find_lane("bd_0")}));
   EXPECT_EQ(route.turns(), std::vector<TurnDirection>{TurnDirection::kStraight});
-  EXPECT_NEAR(route.length_m(), 150.0, 1e-9);
-  ASSERT_EQ(route.waypoints().size(), 76u);  // 0, 2, ..., 150
+  // The lanes end at x = 150; the route is set back by half its 40 m last edge (less than
+  // kRouteEndSetbackM) and ends at x = 130.
+  EXPECT_NEAR(route.length_m(), 130.0, 1e-9);
+  ASSERT_EQ(route.waypoints().size(), 66u);  // 0, 2, ..., 130
   EXPECT_NEAR(route.waypoints()[10].position.x(), 20.0, 1e-9);
-  EXPECT_NEAR(route.waypoints().back().position.x(), 150.0, 1e-9);
+  EXPECT_NEAR(route.waypoints().back().position.x(), 130.0, 1e-9);
   // 0.5 m north of x = 60: left of the eastbound route.
   const RoutePoint at = route.project({60.0, -1.25});
   EXPECT_NEAR(at.s_m, 60.0, 1e-9);
@@ -185,7 +207,43 @@ TEST_F(HandRouteTest, RouteThroughAJunction) {
   EXPECT_NEAR(route.project({60.0, -1.25}, 10.0, 10.0).s_m, 20.0, 1e-9);
   EXPECT_EQ(route.next_waypoint(59.0), 30);
   EXPECT_EQ(route.next_waypoint(60.0), 31);
-  EXPECT_EQ(route.next_waypoint(200.0), 75);
+  EXPECT_EQ(route.next_waypoint(200.0), 65);
+}
+
+TEST_F(HandRouteTest, DestinationWithinTenMetresOfTheTerminalWaypoint) {
+  const Route route(net_, RouteSpec{"east", false, {"ab", "bd"}});
+  const double end_x = route.waypoints().back().position.x();  // 130
+  RouteTracker tracker(route);
+  // Eastbound on the lane centre up to 11 m before the end: not reached.
+  for (double x = 1.0; x <= end_x - 11.0 + 1e-9; x += 0.5) {
+    ASSERT_FALSE(tracker.update({x, -1.75, 0.0}).finished) << "x = " << x;
+  }
+  // 9.5 m along the route but 9 m to the side: farther than the radius in a straight line.
+  EXPECT_FALSE(tracker.update({end_x - 9.5, -1.75 + 9.0, 0.0}).finished);
+  EXPECT_TRUE(tracker.update({end_x - 9.5, -1.75, 0.0}).finished);
+  EXPECT_TRUE(tracker.update({end_x - 2.0, -1.75, 0.0}).finished);
+}
+
+TEST(RouteEndTest, TownStraightEndsBeforeTheJunctionApproach) {
+  for (const std::string town : {"town01", "town02"}) {
+    const Town& t = testing::cached_town(town);
+    const Route& straight = find_route(t.routes, "straight");
+    const Waypoint& terminal = straight.waypoints().back();
+    const Lane& last = t.net.lane(straight.lanes().back());
+    EXPECT_EQ(t.net.edge(last.edge).id, "M2_N1") << town;
+    // The last lane ends at the stop line of N1; the terminal waypoint lies on it, set back.
+    const auto at = t.net.locate(terminal.position, terminal.heading_rad);
+    ASSERT_TRUE(at.has_value());
+    EXPECT_EQ(at->lane, straight.lanes().back()) << town;
+    EXPECT_GE(last.length_m - at->s_m, kRouteEndSetbackM - 0.01) << town;
+    EXPECT_GE((last.shape.back() - terminal.position).norm(), kRouteEndSetbackM - 0.01) << town;
+    EXPECT_FALSE(t.net.in_junction(terminal.position)) << town;
+    // Every point within the destination radius of it lies outside the junction too.
+    for (double d = 0.0; d <= kDestinationRadiusM; d += 1.0) {
+      const Pose2 p = straight.pose_at(straight.length_m() - d);
+      EXPECT_FALSE(t.net.in_junction({p.x_m, p.y_m})) << town << " " << d;
+    }
+  }
 }
 
 TEST_F(HandRouteTest, TrackerReversingEarnsNothing) {

@@ -40,6 +40,7 @@ constexpr const char* kUsage = R"(usage:
                       [--task lane_following|collision_avoidance] [--video out.mp4]
                       [--quiet]
   indrive-env routes --town town01 --out town01.png
+      (lists the routes and warns of any approach two routes leave by different exits)
 Routes: straight, right_loop, left_loop, two_turn (empty: random spawn, no route).
 The follower policy needs a route.)";
 
@@ -100,6 +101,14 @@ int run_routes(std::map<std::string, std::string> flags) {
     std::printf("  %-10s %7.1f m %s, %td turns, %zu junctions\n", route.name().c_str(),
                 route.length_m(), route.is_loop() ? "loop" : "point to point", turns,
                 route.turns().size());
+  }
+  // A policy that sees no route cannot leave one approach by two exits (see routes.h).
+  const std::vector<RouteConflict> conflicts = route_conflicts(town.routes);
+  if (conflicts.empty()) {
+    std::printf("  conflict-free: no approach is left by two different exits\n");
+  }
+  for (const RouteConflict& conflict : conflicts) {
+    std::printf("  warning: route conflict at %s\n", conflict.message.c_str());
   }
   return 0;
 }

@@ -124,6 +124,10 @@ std::string adopt_snapshot_architecture(agent::AgentConfig& config, const Snapsh
 // 3-6 m/s, less than one lap.
 int route_step_budget(double length_m, double speed_mps = 3.0, double slack = 1.5,
                       double dt_s = 0.1);
+// The fraction of the route an episode drove, in [0, 1]: progress_m / length_m (the route's
+// length, set back from its last junction on a point-to-point route), and 1 when the
+// destination event fired (within kDestinationRadiusM of the terminal waypoint, or a lap).
+double route_completion(double progress_m, double length_m, std::uint32_t events);
 // The env config for protocol episodes: the route's step budget ends them, so the training
 // time limit (env.time_limit_steps) is lifted out of its way.
 env::EnvConfig protocol_env_config(env::EnvConfig config);

@@ -11,8 +11,13 @@
 //                    lies beyond its lane's marking: |lateral| + w/2 - lane_w/2 > overlap
 //   wrong_direction  outside junctions, heading differs from the lane's by more than 90 deg
 //   off_road         the ego's footprint centre is on no lane and in no junction
+//   off_route        only on a route (evaluation, task phases): outside junctions, the ego is on
+//                    a normal lane of an edge the route does not drive (it took a turn the route
+//                    does not take), or farther than the lane's width plus off_route_margin_m
+//                    from the route's centre line; never without a route (pretraining)
 //   stall            speed under 1 km/h for 60 s in a row
-//   destination      the route's end reached or its loop completed (from the route tracker)
+//   destination      within kDestinationRadiusM (10 m) of a point-to-point route's terminal
+//                    waypoint, or the loop's lap completed (from the route tracker)
 //   time_limit       the episode reached its step limit (EventConfig::time_limit_steps; the
 //                    evaluator sets a per-route budget instead, 5 steps per metre of route)
 //
@@ -24,9 +29,11 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "indrive/envserver/ego.h"
 #include "indrive/envserver/net.h"
+#include "indrive/envserver/routes.h"
 #include "indrive/envserver/scene.h"
 
 namespace indrive::env {
@@ -40,12 +47,13 @@ enum EventBit : std::uint32_t {
   kStall = 1u << 4,
   kDestination = 1u << 5,
   kTimeLimit = 1u << 6,
+  kOffRoute = 1u << 7,
 };
-inline constexpr int kNumEvents = 7;
+inline constexpr int kNumEvents = 8;
 inline constexpr std::uint32_t kFailureEvents =
-    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kTimeLimit;
+    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kTimeLimit | kOffRoute;
 inline constexpr std::uint32_t kTerminalEvents =
-    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kDestination;
+    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kDestination | kOffRoute;
 
 // Returns the name of one event bit ("collision", ...), or "unknown".
 const char* event_name(EventBit bit);
@@ -65,6 +73,7 @@ struct EventConfig {
   double stall_speed_mps = 1.0 / 3.6;
   double stall_time_s = 60.0;
   int time_limit_steps = 1000;
+  double off_route_margin_m = 1.0;  // beyond one lane width from the route's centre line
   double dt_s = 0.1;
 };
 
@@ -86,16 +95,18 @@ class EventDetector {
   // The network must outlive the detector.
   EventDetector(const RoadNetwork& net, const EventConfig& config, const EgoParams& ego);
 
-  // Starts a new episode (clears the stall timer).
-  void reset();
+  // Starts a new episode (clears the stall timer). With a route (which must outlive the
+  // episode and come from the same network) off_route is checked; without one it never fires.
+  void reset(const Route* route = nullptr);
 
   // What one step's check needs.
   struct Inputs {
     EgoState ego;
-    std::span<const Box> others;  // other vehicles' boxes
-    bool sumo_collision = false;  // SUMO listed a collision involving the ego (diagnostic only)
-    bool route_finished = false;  // the route tracker reports the end / a completed lap
-    int step = 0;                 // steps taken in this episode, this one included
+    std::span<const Box> others;    // other vehicles' boxes
+    bool sumo_collision = false;    // SUMO listed a collision involving the ego (diagnostic only)
+    bool route_finished = false;    // the route tracker reports the end / a completed lap
+    double route_distance_m = 0.0;  // the route tracker's distance to the route centre line
+    int step = 0;                   // steps taken in this episode, this one included
   };
   // Returns the event bits of this step.
   std::uint32_t update(const Inputs& inputs);
@@ -113,6 +124,8 @@ class EventDetector {
   EventConfig config_;
   EgoParams ego_;
   int slow_steps_ = 0;
+  const Route* route_ = nullptr;
+  std::vector<bool> route_edges_;  // per network edge: the route drives it
   RoadStatus road_;
   bool sumo_only_collision_ = false;
 };

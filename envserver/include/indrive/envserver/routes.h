@@ -27,6 +27,17 @@
 
 namespace indrive::env {
 
+// A point-to-point route's destination is reached within this radius of its terminal
+// waypoint (straight-line distance, once the tracker is that close along the route): the goal
+// radius of the public InDRiVE code.
+inline constexpr double kDestinationRadiusM = 10.0;
+// A loop's lap is completed this close (along the route) to its start.
+inline constexpr double kLapToleranceM = 3.0;
+// A point-to-point route ends this far before the end of its last edge (at most half that
+// edge), so its terminal waypoint lies before the stop line of the junction the edge runs
+// into, not in that junction's approach.
+inline constexpr double kRouteEndSetbackM = 20.0;
+
 // The route names every town provides, in this order.
 inline constexpr std::array<std::string_view, 4> kRouteNames = {"straight", "right_loop",
                                                                 "left_loop", "two_turn"};
@@ -78,9 +89,11 @@ class Route {
   const std::vector<int>& lanes() const { return lanes_; }
   // Turn direction at each junction crossed, in driving order (a loop's closing junction last).
   const std::vector<TurnDirection>& turns() const { return turns_; }
-  // Waypoints every ~spacing_m from the start; a loop's last waypoint lies before its start.
+  // Waypoints every ~spacing_m from the start; a loop's last waypoint lies before its start,
+  // a point-to-point route's last (terminal) waypoint at length_m().
   const std::vector<Waypoint>& waypoints() const { return waypoints_; }
-  // Total length of the centre line in metres (one lap for a loop).
+  // Total length of the centre line in metres (one lap for a loop; a point-to-point route's
+  // ends kRouteEndSetbackM before the end of its last edge).
   double length_m() const { return length_m_; }
   // Pose at the first waypoint, facing along the route.
   Pose2 start_pose() const;
@@ -114,16 +127,18 @@ struct RouteStep {
   int next_waypoint = 0;     // index into Route::waypoints()
   double lateral_m = 0.0;    // signed offset from the route centre line, positive to the left
   double distance_to_route_m = 0.0;  // |lateral_m|
-  bool finished = false;             // reached the end (point to point) or completed one lap (loop)
+  bool finished = false;  // within the destination radius of the terminal waypoint (point to
+                          // point) or one lap completed (loop)
 };
 
 // Follows a vehicle along a route step by step. Searching near the last position keeps loops
 // and routes that pass near themselves unambiguous.
 class RouteTracker {
  public:
-  // Tracks `route`, which must outlive the tracker. `finish_tolerance_m` is how close to the
-  // end a point-to-point route counts as reached.
-  explicit RouteTracker(const Route& route, double finish_tolerance_m = 3.0);
+  // Tracks `route`, which must outlive the tracker. A point-to-point route is finished once
+  // the vehicle is within `destination_radius_m` of its terminal waypoint, both along the route
+  // and in a straight line; a loop once kLapToleranceM short of a full lap.
+  explicit RouteTracker(const Route& route, double destination_radius_m = kDestinationRadiusM);
   // Restarts at arc length `s_m` (the route start by default).
   void reset(double s_m = 0.0);
   // Advances with the vehicle's new pose and reports progress.
@@ -133,7 +148,7 @@ class RouteTracker {
 
  private:
   const Route* route_;
-  double finish_tolerance_m_;
+  double destination_radius_m_;
   double start_s_m_ = 0.0;
   double s_m_ = 0.0;              // current arc length on the route, wrapped for loops
   double progress_m_ = 0.0;       // unwrapped distance since reset
@@ -148,11 +163,31 @@ std::vector<RouteSpec> read_route_file(const std::filesystem::path& path);
 void write_route_file(const std::filesystem::path& path, const std::vector<RouteSpec>& specs);
 // Finds the four standard routes in any network: the longest straight corridor, the smallest
 // loops of right turns (clockwise) and of left turns (counter-clockwise), and the smallest
-// loop with both. Throws RouteError naming the route kinds the network does not allow.
+// loop with both; among the candidates of each kind (one per start edge) it takes the best
+// that keeps the set conflict-free (route_conflicts()), the best alone when none does. Throws
+// RouteError naming the route kinds the network does not allow.
 std::vector<RouteSpec> derive_routes(const RoadNetwork& net);
 // Builds a Route per spec; throws RouteError when a spec does not fit the network.
 std::vector<Route> build_routes(const RoadNetwork& net, const std::vector<RouteSpec>& specs);
 // Returns the route called `name`; throws RouteError listing the known names otherwise.
 const Route& find_route(const std::vector<Route>& routes, std::string_view name);
+
+// Two routes of a town that leave the same approach by different exits. The policy sees no
+// route, only the camera, so on such an approach it cannot know which exit to take: the
+// success rates of the two routes could not both reach 100 %.
+struct RouteConflict {
+  std::string approach;  // the incoming normal edge
+  std::string route_a;   // the route met first (in spec order) ...
+  std::string exit_a;    // ... and the edge it leaves the approach by
+  std::string route_b;   // a later route (or route_a again, further on) ...
+  std::string exit_b;    // ... leaving by another edge
+  std::string message;   // one line naming all of the above
+};
+// The conflicts of a set of routes. An approach is a consecutive edge pair (in -> out) of a
+// route, a loop's closing pair (last -> first) included; the set is conflict-free when no
+// incoming edge is left by two different exits across all routes. Each (approach, exit)
+// clash is reported once, against the first exit seen.
+std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs);
+std::vector<RouteConflict> route_conflicts(const std::vector<Route>& routes);
 
 }  // namespace indrive::env
