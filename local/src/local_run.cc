@@ -251,8 +251,8 @@ struct LocalRun::Impl {
     line.precision(4);
     line << "steps " << env_steps() << " | updates " << updates() << " | " << steps / elapsed
          << " steps/s | " << done_updates / elapsed << " upd/s";
-    for (const char* key : {"wm/recon", "wm/kl", "intrinsic/loss", "expl/reward", "wm/reward",
-                            "task/reward", "task/actor_loss"}) {
+    for (const char* key : {"wm/recon", "wm/kl", "intrinsic/loss", "expl/reward", "expl/entropy",
+                            "wm/reward", "task/reward", "task/actor_loss", "task/entropy"}) {
       if (record.contains(key)) line << " | " << key << " " << record[key].get<double>();
     }
     line << " | coverage " << coverage.distinct_per_window() << " seg/1k, "
@@ -297,6 +297,10 @@ struct LocalRun::Impl {
     if (trainer.counters().env_steps == 0) return;
     if (env_steps() != logged_steps) log_metrics();
     save_checkpoint();
+    // The acting policy as a snapshot file, evaluable without this run directory
+    // (indrive-actor --evaluate --snapshot FILE).
+    actor::write_snapshot_file(run.path() / "snapshot.params", trainer.agent().snapshot(),
+                               agent_config);
     coverage.write_csv(run.path() / "coverage.csv");
     INDRIVE_LOG(kInfo, "local") << (stop.load() ? "stopped" : "budget reached") << ": "
                                 << env_steps() << " env steps, " << updates() << " updates, "
