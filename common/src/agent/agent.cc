@@ -209,6 +209,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     } else {
       rewards = intrinsic_->reward(traj.state_features(), traj.actions, traj.next_features());
       metrics.emplace_back("intrinsic/raw_reward", intrinsic_->last_raw_reward());
+      metrics.emplace_back("intrinsic/raw_std", intrinsic_->last_raw_std());
     }
   }
   timing_.reward = clock.lap();

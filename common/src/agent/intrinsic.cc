@@ -43,12 +43,16 @@ Transitions make_transitions(Tensor features, Tensor post_probs, Tensor actions,
 IntrinsicModule::IntrinsicModule(const IntrinsicConfig& config) : config_(config) {}
 
 void IntrinsicModule::scale_raw(std::vector<float>& raw, float scale) {
-  double sum = 0.0;
+  double sum = 0.0, square_sum = 0.0;
   for (float& r : raw) {
     sum += r;
+    square_sum += static_cast<double>(r) * r;
     r *= scale;
   }
-  last_raw_reward_ = raw.empty() ? 0.0f : static_cast<float>(sum / static_cast<double>(raw.size()));
+  const double n = std::max<double>(1.0, static_cast<double>(raw.size()));
+  last_raw_reward_ = static_cast<float>(sum / n);
+  last_raw_std_ =
+      static_cast<float>(std::sqrt(std::max(0.0, square_sum / n - (sum / n) * (sum / n))));
 }
 
 void IntrinsicModule::make_optimizer() {

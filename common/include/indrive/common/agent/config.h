@@ -86,8 +86,8 @@ struct IntrinsicConfig {
   // at order 1, above the return normaliser's floor and wider than a two-hot bin. LD's 1e4 is
   // Plan2Explore's intrinsic_reward_scale; ICM's and RND's come from the same rule, measured.
   float disag_scale = 1e4f;
-  float icm_scale = 1.0f;
-  float rnd_scale = 1.0f;
+  float icm_scale = 10.0f;
+  float rnd_scale = 10.0f;
   float icm_eta = 1.0f;            // ICM reward scale
   float icm_inverse_scale = 1.0f;  // weight of the ICM inverse loss
   float norm_rate = 0.01f;         // rho of the EMA mean/variance normaliser

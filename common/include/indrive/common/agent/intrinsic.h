@@ -60,6 +60,9 @@ class IntrinsicModule {
   // Mean raw signal of the last reward() call (LD: variance or std; ICM: forward error; RND:
   // prediction error), before the module's scale and normaliser, for metrics.
   float last_raw_reward() const { return last_raw_reward_; }
+  // Standard deviation of that raw signal over the call's transitions: the spread that tells
+  // imagined actions apart, and what the ICM and RND normaliser's eps is compared with.
+  float last_raw_std() const { return last_raw_std_; }
 
  protected:
   explicit IntrinsicModule(const IntrinsicConfig& config);
@@ -70,7 +73,8 @@ class IntrinsicModule {
   std::unique_ptr<nn::Adam> optimizer_;
   float last_loss_ = 0.0f;
   float last_raw_reward_ = 0.0f;
-  // Records the mean of the raw signal and multiplies it by `scale` in place.
+  float last_raw_std_ = 0.0f;
+  // Records the mean and spread of the raw signal and multiplies it by `scale` in place.
   void scale_raw(std::vector<float>& raw, float scale);
 };
 
