@@ -164,6 +164,7 @@ TEST(LatentDisagreement, RewardIsTheScaledMeanVarianceAcrossMembers) {
   EXPECT_NEAR(std_reward[1], scale * std_sum / s, scale * 1e-6);
   EXPECT_GT(var_reward[1], 0.0f);
   EXPECT_NEAR(ld_std.last_raw_reward(), (std_reward[0] + std_reward[1]) / (2 * scale), 1e-6);
+  EXPECT_NEAR(ld_std.last_raw_std(), std::abs(std_reward[0] - std_reward[1]) / (2 * scale), 1e-6);
 }
 
 TEST(Icm, ForwardErrorRewardIsHigherOnUnseenTransitions) {
