@@ -1,0 +1,156 @@
+#!/usr/bin/env bash
+# The paper's experiment at a CPU budget, one (seed, method) chain per call, resumable, so that
+# a grid too long for one sitting is split by seed and merged by the report:
+#   pretrain  reward-free pretraining on town01 (indrive-train-local), then the run's final
+#             snapshot file;
+#   zeroshot  that snapshot, every parameter frozen, on town01 and town02: all four routes,
+#             densities 5/10/20, --episodes per cell (indrive-actor --evaluate --snapshot);
+#   fewshot   lane following and collision avoidance fine-tuned from the pretraining for
+#             --task-steps on town01's routes, each evaluated like the zero-shot;
+#   dreamer   DreamerV3 from scratch on a task for the same total budget (pretrain + task
+#             steps), evaluated the same way;
+#   report    `indrive report` over every evaluation under --out (Tables III-VI, 95% CIs).
+# Every stage leaves a DONE file in its run directory and is skipped when it is there, so a
+# chain stopped midway resumes at its stage (a training run resumes from its checkpoints).
+#
+#   deploy/experiments/paper_grid.sh chain --seed 0 --method disag     # pretrain, zero/few-shot
+#   deploy/experiments/paper_grid.sh chain --seed 0 --method random    # zero-shot only
+#   deploy/experiments/paper_grid.sh dreamer --seed 0 --task lane_following
+#   deploy/experiments/paper_grid.sh report
+# Two chains side by side on 2 cores: give each OMP_NUM_THREADS=1 (the script sets it and
+# OMP_WAIT_POLICY=passive unless they are set).
+# Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
+# --task-steps N (10000), --episodes N per town x route x density (5), --stages "pretrain
+# zeroshot fewshot" (a chain's stages), --set KEY=VALUE for every training run (repeatable).
+set -euo pipefail
+
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
+bin="$root/build/bin"
+out="$root/runs/paper-grid"
+preset=tiny
+pretrain_steps=100000
+task_steps=10000
+episodes=5
+seed=0
+method=disag
+task=lane_following
+stages="pretrain zeroshot fewshot"
+extra=()
+
+usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
+[[ $# -ge 1 ]] || { usage; exit 2; }
+command=$1
+shift
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --bin) bin=$2; shift 2 ;;
+    --out) out=$2; shift 2 ;;
+    --preset) preset=$2; shift 2 ;;
+    --pretrain-steps) pretrain_steps=$2; shift 2 ;;
+    --task-steps) task_steps=$2; shift 2 ;;
+    --episodes) episodes=$2; shift 2 ;;
+    --seed) seed=$2; shift 2 ;;
+    --method) method=$2; shift 2 ;;
+    --task) task=$2; shift 2 ;;
+    --stages) stages=$2; shift 2 ;;
+    --set) extra+=(--set "$2"); shift 2 ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
+  esac
+done
+case $method in disag|icm|rnd|random) ;; *)
+  echo "--method must be disag, icm, rnd or random, got '$method'" >&2; exit 2 ;;
+esac
+case $task in lane_following|collision_avoidance) ;; *)
+  echo "--task must be lane_following or collision_avoidance, got '$task'" >&2; exit 2 ;;
+esac
+for program in indrive indrive-actor indrive-train-local; do
+  [[ -x $bin/$program ]] || { echo "no $bin/$program: build first (bash deploy/setup.sh build)" >&2; exit 1; }
+done
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive}
+
+say() { printf '\033[1m[grid %s]\033[0m %s\n' "$(date +%H:%M:%S)" "$*"; }
+seed_dir="$out/s$seed"
+mkdir -p "$seed_dir"
+common=(--set "preset=$preset" --set "run.seed=$seed" ${extra[@]+"${extra[@]}"})
+short() { [[ $1 == lane_following ]] && echo lf || echo ca; }
+config_of() { # phase task -> config file
+  case $1 in
+    pretrain) echo "$root/deploy/configs/pretrain_$2.yaml" ;;
+    finetune) echo "$root/deploy/configs/finetune_$(short "$2").yaml" ;;
+    dreamer) echo "$root/deploy/configs/dreamer_$(short "$2").yaml" ;;
+  esac
+}
+done_mark() { [[ -f $1/DONE ]]; }
+
+# Trains one run to its budget (resuming when stopped) and checks its snapshot file.
+train() { # run_dir config steps [--set ...]
+  local dir=$1 config=$2 steps=$3
+  shift 3
+  if done_mark "$dir"; then say "$dir done already"; return; fi
+  mkdir -p "$dir"
+  "$bin/indrive-train-local" --config "$config" --run-dir "$dir" "${common[@]}" \
+    --set "run.budget_env_steps=$steps" "$@" --log-level warn 2>&1 | tee -a "$dir/train.log" |
+    awk '/^done/ || /failed/ || NR % 12 == 1 { print; fflush() }'  # about one line a minute
+  [[ -f $dir/snapshot.params ]] || { echo "$dir has no snapshot.params: training failed (see $dir/train.log)" >&2; exit 1; }
+  "$bin/indrive" plot "$dir" > /dev/null 2>&1 || echo "(no plots for $dir)"
+  touch "$dir/DONE"
+}
+
+# Evaluates a snapshot file (or the random policy) on the grid with two evaluators.
+evaluate() { # eval_dir kind snapshot|random [--set ...]: the method and task the rows carry
+  local dir=$1 kind=$2 source=$3
+  shift 3
+  if done_mark "$dir"; then say "$dir done already"; return; fi
+  rm -rf "$dir/eval"
+  mkdir -p "$dir"
+  local policy=(--snapshot "$source")
+  [[ $source == random ]] && policy=(--policy random)
+  local pids=()
+  for j in 0 1; do
+    "$bin/indrive-actor" --evaluate "${policy[@]}" --run-dir "$dir" --id "$j" --of 2 \
+      --set "preset=$preset" --set "run.seed=$seed" --set "eval.kind=$kind" \
+      --set "eval.episodes_per_cell=$episodes" --set "eval.towns=town01,town02" \
+      "$@" --log-level warn > "$dir/evaluator-$j.log" 2>&1 &
+    pids+=($!)
+  done
+  for pid in "${pids[@]}"; do wait "$pid" || { echo "an evaluator of $dir failed (see $dir/evaluator-*.log)" >&2; exit 1; }; done
+  touch "$dir/DONE"
+}
+
+has_stage() { [[ " $stages " == *" $1 "* ]]; }
+case $command in
+  chain)
+    pre="$seed_dir/pretrain-$method"
+    if [[ $method == random ]]; then
+      has_stage zeroshot && { say "zero-shot random policy, seed $seed"; evaluate "$seed_dir/zeroshot-random" zero_shot random; }
+      exit 0
+    fi
+    has_stage pretrain && { say "pretrain $method seed $seed, $pretrain_steps env steps ($preset)"; train "$pre" "$(config_of pretrain "$method")" "$pretrain_steps"; }
+    has_stage zeroshot && { say "zero-shot $method seed $seed"; evaluate "$seed_dir/zeroshot-$method" zero_shot "$pre/snapshot.params" --set "agent.intrinsic.method=$method"; }
+    if has_stage fewshot; then
+      for t in lane_following collision_avoidance; do
+        ft="$seed_dir/finetune-$(short "$t")-$method"
+        say "few-shot $t from $method seed $seed, $task_steps env steps"
+        ckpt=$(ls "$pre"/checkpoints/ckpt-*.bin | sort -V | tail -n 1)
+        train "$ft" "$(config_of finetune "$t")" "$task_steps" --set "learner.init_checkpoint=$ckpt"
+        evaluate "$seed_dir/fewshot-$(short "$t")-$method" few_shot "$ft/snapshot.params" \
+          --set "agent.intrinsic.method=$method" --set "agent.task=$t"
+      done
+    fi
+    ;;
+  dreamer)
+    total=$((pretrain_steps + task_steps))
+    d="$seed_dir/dreamer-$(short "$task")"
+    say "DreamerV3 from scratch on $task seed $seed, $total env steps"
+    train "$d" "$(config_of dreamer "$task")" "$total"
+    evaluate "$seed_dir/fewshot-$(short "$task")-dreamer" few_shot "$d/snapshot.params" \
+      --set "agent.phase=dreamer" --set "agent.task=$task"
+    ;;
+  report)
+    mapfile -t dirs < <(find "$out" -mindepth 2 -maxdepth 2 -type d \( -name 'zeroshot-*' -o -name 'fewshot-*' \) | sort)
+    [[ ${#dirs[@]} -gt 0 ]] || { echo "no evaluations under $out yet" >&2; exit 1; }
+    "$bin/indrive" report "${dirs[@]}" --out "$out/report"
+    ;;
+  *) echo "unknown command '$command': chain, dreamer or report (see --help)" >&2; exit 2 ;;
+esac
