@@ -14,7 +14,7 @@
 # chain stopped midway resumes at its stage (a training run resumes from its checkpoints).
 #
 #   deploy/experiments/paper_grid.sh chain --seed 0 --method disag     # pretrain, zero/few-shot
-#   deploy/experiments/paper_grid.sh chain --seed 0 --method random    # zero-shot only
+#   deploy/experiments/paper_grid.sh chain --seed 0 --method random    # its episodes, zero-shot
 #   deploy/experiments/paper_grid.sh dreamer --seed 0 --task lane_following
 #   deploy/experiments/paper_grid.sh report
 # Two chains side by side on 2 cores: give each OMP_NUM_THREADS=1 (the script sets it and
@@ -123,6 +123,9 @@ case $command in
   chain)
     pre="$seed_dir/pretrain-$method"
     if [[ $method == random ]]; then
+      # The baseline's training-town episodes (length, reach, coverage) over the same env steps;
+      # it acts uniformly at random and never trains.
+      has_stage pretrain && { say "random policy, seed $seed, $pretrain_steps env steps"; train "$pre" "$(config_of pretrain disag)" "$pretrain_steps" --random; }
       has_stage zeroshot && { say "zero-shot random policy, seed $seed"; evaluate "$seed_dir/zeroshot-random" zero_shot random; }
       exit 0
     fi
