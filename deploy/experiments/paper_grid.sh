@@ -16,6 +16,7 @@
 #   deploy/experiments/paper_grid.sh chain --seed 0 --method disag     # pretrain, zero/few-shot
 #   deploy/experiments/paper_grid.sh chain --seed 0 --method random    # its episodes, zero-shot
 #   deploy/experiments/paper_grid.sh dreamer --seed 0 --task lane_following
+#   deploy/experiments/paper_grid.sh summary   # the pretraining measures, a markdown table
 #   deploy/experiments/paper_grid.sh report
 # Two chains side by side on 2 cores: give each OMP_NUM_THREADS=1 (the script sets it and
 # OMP_WAIT_POLICY=passive unless they are set).
@@ -37,7 +38,7 @@ task=lane_following
 stages="pretrain zeroshot fewshot"
 extra=()
 
-usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 command=$1
 shift
@@ -150,10 +151,37 @@ case $command in
     evaluate "$seed_dir/fewshot-$(short "$task")-dreamer" few_shot "$d/snapshot.params" \
       --set "agent.phase=dreamer" --set "agent.task=$task"
     ;;
+  summary)
+    # The pretraining measures of every pretrain-* run under --out, one markdown row each: the
+    # exploration actor's entropy and the length and reach of the last 20 training episodes at
+    # the end, the share of town01 visited, the return scale and the intrinsic reward.
+    python3 - "$out" <<'PY'
+import json, pathlib, sys
+rows = []
+for run in sorted(pathlib.Path(sys.argv[1]).glob("s*/pretrain-*")):
+    lines = [json.loads(l) for l in open(run / "metrics.jsonl") if l.strip()]
+    if not lines:
+        continue
+    last = lines[-1]
+    tail = [l for l in lines if l["env_steps"] > 0.9 * last["env_steps"] and "expl/entropy" in l]
+    mean = lambda key: sum(l[key] for l in tail) / len(tail) if tail else float("nan")
+    rows.append((run.parent.name, run.name.removeprefix("pretrain-"), last["env_steps"],
+                 mean("expl/entropy"), last.get("episode_length_last20", float("nan")),
+                 last.get("episode_reach_last20", float("nan")),
+                 100 * last.get("coverage_fraction_visited", float("nan")),
+                 mean("expl/return_scale"), mean("intrinsic/raw_reward"), mean("expl/reward")))
+print("| seed | method | env steps | entropy (last 10%) | steps per episode (last 20) |"
+      " segments per episode (last 20) | % of town visited | return scale (last 10%) |"
+      " raw intrinsic reward (last 10%) | reward reaching the actor-critic (last 10%) |")
+print("|---|---|---|---|---|---|---|---|---|---|")
+for r in rows:
+    print("| %s | %s | %d | %.2f | %.0f | %.1f | %.1f | %.2f | %.3g | %.3g |" % r)
+PY
+    ;;
   report)
     mapfile -t dirs < <(find "$out" -mindepth 2 -maxdepth 2 -type d \( -name 'zeroshot-*' -o -name 'fewshot-*' \) | sort)
     [[ ${#dirs[@]} -gt 0 ]] || { echo "no evaluations under $out yet" >&2; exit 1; }
     "$bin/indrive" report "${dirs[@]}" --out "$out/report"
     ;;
-  *) echo "unknown command '$command': chain, dreamer or report (see --help)" >&2; exit 2 ;;
+  *) echo "unknown command '$command': chain, dreamer, summary or report (see --help)" >&2; exit 2 ;;
 esac
