@@ -40,6 +40,7 @@ extra=()
 
 usage() { sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
+[[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
 shift
 while [[ $# -gt 0 ]]; do
