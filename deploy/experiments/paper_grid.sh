@@ -22,7 +22,8 @@
 # OMP_WAIT_POLICY=passive unless they are set).
 # Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
 # --task-steps N (10000), --episodes N per town x route x density (5), --stages "pretrain
-# zeroshot fewshot" (a chain's stages), --set KEY=VALUE for every training run (repeatable).
+# zeroshot fewshot" (a chain's stages), --task T (dreamer's task; a chain's fewshot then does
+# only T), --set KEY=VALUE for every training run (repeatable).
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -35,10 +36,11 @@ episodes=5
 seed=0
 method=disag
 task=lane_following
+tasks="lane_following collision_avoidance"  # of a chain's fewshot stage; --task picks one
 stages="pretrain zeroshot fewshot"
 extra=()
 
-usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -53,7 +55,7 @@ while [[ $# -gt 0 ]]; do
     --episodes) episodes=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
     --method) method=$2; shift 2 ;;
-    --task) task=$2; shift 2 ;;
+    --task) task=$2; tasks=$2; shift 2 ;;
     --stages) stages=$2; shift 2 ;;
     --set) extra+=(--set "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
@@ -134,7 +136,7 @@ case $command in
     has_stage pretrain && { say "pretrain $method seed $seed, $pretrain_steps env steps ($preset)"; train "$pre" "$(config_of pretrain "$method")" "$pretrain_steps"; }
     has_stage zeroshot && { say "zero-shot $method seed $seed"; evaluate "$seed_dir/zeroshot-$method" zero_shot "$pre/snapshot.params" --set "agent.intrinsic.method=$method"; }
     if has_stage fewshot; then
-      for t in lane_following collision_avoidance; do
+      for t in $tasks; do
         ft="$seed_dir/finetune-$(short "$t")-$method"
         say "few-shot $t from $method seed $seed, $task_steps env steps"
         ckpt=$(ls "$pre"/checkpoints/ckpt-*.bin | sort -V | tail -n 1)
