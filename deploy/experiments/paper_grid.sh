@@ -140,7 +140,8 @@ case $command in
         ft="$seed_dir/finetune-$(short "$t")-$method"
         say "few-shot $t from $method seed $seed, $task_steps env steps"
         ckpt=$(ls "$pre"/checkpoints/ckpt-*.bin | sort -V | tail -n 1)
-        train "$ft" "$(config_of finetune "$t")" "$task_steps" --set "learner.init_checkpoint=$ckpt"
+        train "$ft" "$(config_of finetune "$t")" "$task_steps" --set "learner.init_checkpoint=$ckpt" \
+          --set "agent.intrinsic.method=$method"  # the checkpoint's module, not the config's
         evaluate "$seed_dir/fewshot-$(short "$t")-$method" few_shot "$ft/snapshot.params" \
           --set "agent.intrinsic.method=$method" --set "agent.task=$t"
       done
