@@ -83,6 +83,10 @@ void declare_service_schema(config::Schema& schema) {
       .add_float("actor.heartbeat_s", 1.0, "seconds between heartbeats", 0.05)
       .add_float("actor.request_after_s", 2.0,
                  "seconds an announced snapshot may be missing before it is re-requested", 0.1)
+      .add_float("actor.rejoin_after_s", 20.0,
+                 "seconds without word of the learner (allowance or heartbeat) after which a "
+                 "waiting actor replaces its DDS participant (0: never)",
+                 0.0)
       .add_float("actor.coverage_period_s", 60.0,
                  "seconds between writes of the actor's coverage/actor-<id>.csv", 1.0);
   schema.add_bool("local.random", false,

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -47,23 +48,34 @@ class FaultTest : public ::testing::Test {
   std::unique_ptr<Child> start_learner(const std::vector<std::string>& overrides = {}) {
     return std::make_unique<Child>(args("indrive-learner", overrides), dir_.path() / "learner.log");
   }
-  std::unique_ptr<Child> start_actor(int id) {
-    auto argv = args("indrive-actor");
+  std::unique_ptr<Child> start_actor(int id, const std::vector<std::string>& overrides = {}) {
+    auto argv = args("indrive-actor", overrides);
     argv.insert(argv.end(), {"--id", std::to_string(id)});
     return std::make_unique<Child>(argv, dir_.path() / ("actor-" + std::to_string(id) + ".log"));
   }
 
   // Every log of the test directory and the launcher's run logs, for failure messages.
+  // Actor logs come first and each is cut to its last 4,000 characters, so that a failure
+  // message cut short by a CI log still shows the actors.
   std::string logs() const {
-    std::string text;
+    std::vector<fs::path> files;
     for (const fs::path& folder : {dir_.path(), run_dir_ / "logs"}) {
       if (!fs::is_directory(folder)) continue;
       for (const auto& entry : fs::directory_iterator(folder)) {
-        if (entry.path().extension() != ".log") continue;
-        std::string body = testing::slurp(entry.path());
-        if (body.size() > 6000) body = "...\n" + body.substr(body.size() - 6000);
-        text += "----- " + entry.path().filename().string() + "\n" + body;
+        if (entry.path().extension() == ".log") files.push_back(entry.path());
       }
+    }
+    std::stable_sort(files.begin(), files.end(), [](const fs::path& a, const fs::path& b) {
+      const bool actor_a = a.filename().string().starts_with("actor");
+      const bool actor_b = b.filename().string().starts_with("actor");
+      return actor_a != actor_b ? actor_a : a.filename() < b.filename();
+    });
+    std::string text;
+    for (const auto& file : files) {
+      std::string body = testing::slurp(file);
+      if (body.size() > 4000) body = "...\n" + body.substr(body.size() - 4000);
+      text += "----- " + file.parent_path().filename().string() + "/" + file.filename().string() +
+              "\n" + body;
     }
     return text;
   }
@@ -642,6 +654,43 @@ TEST_F(FaultTest, ActorsRejectForeignAndCorruptSnapshotsAndKeepRunning) {
   actor1->signal(SIGTERM);
   EXPECT_EQ(actor0->wait(30s), 0) << logs();
   EXPECT_EQ(actor1->wait(30s), 0) << logs();
+}
+
+// An actor that hears nothing of its learner replaces its DDS participant every
+// actor.rejoin_after_s, and the replaced participant still works: a learner that starts late is
+// found and the actor trains with it, after which the replacements stop.
+TEST_F(FaultTest, AnActorThatHearsNoLearnerReplacesItsParticipantAndJoinsALateLearner) {
+  ProcessWatch watch(domain_, profile_);
+  auto actor0 = start_actor(0, {"actor.rejoin_after_s=1"});
+  const auto rejoins = [&] {
+    const std::string text = testing::slurp(dir_.path() / "actor-0.log");
+    std::size_t count = 0;
+    for (auto at = text.find("recreating its DDS participant"); at != std::string::npos;
+         at = text.find("recreating its DDS participant", at + 1)) {
+      ++count;
+    }
+    return count;
+  };
+  ASSERT_TRUE(wait_until(60s, [&] { return rejoins() >= 2; })) << logs();
+  ASSERT_TRUE(actor0->running()) << logs();
+  EXPECT_TRUE(watch.chunks().empty()) << "no chunk without a learner's allowance";
+
+  auto learner = start_learner();
+  ASSERT_TRUE(wait_until(90s, [&] { return watch.min_newest_chunk_version({0}) >= 1; })) << logs();
+  // With the learner heard (its heartbeat comes every 100 ms), no more replacements.
+  const std::size_t joined_after = rejoins();
+  std::this_thread::sleep_for(3s);
+  EXPECT_EQ(rejoins(), joined_after) << logs();
+  SeenHeartbeat beat;
+  ASSERT_TRUE(watch.heartbeat(msg::ROLE_ACTOR, 0, beat));
+  EXPECT_GE(beat.policy_version, 1u);
+  std::printf("[figures] actor alone: %zu participant replacements before the learner came\n",
+              joined_after);
+
+  actor0->signal(SIGTERM);
+  EXPECT_EQ(actor0->wait(30s), 0) << logs();
+  learner->signal(SIGTERM);
+  EXPECT_EQ(learner->wait(60s), 0) << logs();
 }
 
 }  // namespace

@@ -24,8 +24,9 @@ struct ActorStats {
   std::uint64_t snapshots_loaded = 0;
   std::uint64_t snapshots_rejected = 0;
   std::uint64_t snapshot_requests = 0;
-  double wait_s = 0.0;     // time spent waiting at the allowance
-  double publish_s = 0.0;  // time spent compressing and writing chunks
+  std::uint64_t rejoins = 0;  // DDS participants replaced after silence (actor.rejoin_after_s)
+  double wait_s = 0.0;        // time spent waiting at the allowance
+  double publish_s = 0.0;     // time spent compressing and writing chunks
   double total_s = 0.0;
 };
 
