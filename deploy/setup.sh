@@ -2,7 +2,7 @@
 # Sets up InDRiVE-on-SUMO on a Debian 12 machine, builds it, and runs the main job or the tests.
 #
 #   bash deploy/setup.sh run    # install what is missing, build, run the main job (tiny preset)
-#   bash deploy/setup.sh test   # install what is missing, build, run the test suite
+#   bash deploy/setup.sh test   # install what is missing, build, run the tests and a brief fuzz
 #   bash deploy/setup.sh build  # install what is missing and build only
 #   bash deploy/setup.sh deps   # install what is missing only (the Docker image's first layer)
 #
@@ -28,17 +28,22 @@ packages=(
   libgtest-dev libgmock-dev
   ffmpeg
 )
+# The test command also builds and briefly runs the fuzz targets (tests/fuzz/README.md):
+# clang's libFuzzer and sanitizer runtimes, and its OpenMP.
+test_packages=(clang libclang-rt-14-dev libomp-14-dev)
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 
 install_missing() {
   local missing=()
-  for p in "${packages[@]}"; do
+  local wanted=("${packages[@]}")
+  if [[ $mode == test ]]; then wanted+=("${test_packages[@]}"); fi
+  for p in "${wanted[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
       missing+=("$p")
   done
   if [ ${#missing[@]} -eq 0 ]; then
-    say "all ${#packages[@]} packages present"
+    say "all ${#wanted[@]} packages present"
     return
   fi
   local sudo=()
@@ -71,7 +76,11 @@ build() {
 run_tests() {
   # unit + integration + smoke; benchmarks (label bench) run only on request: ctest -L bench
   say "running tests (unit, integration, smoke)"
-  ctest --test-dir "$build_dir" -LE bench --output-on-failure -j "$(nproc)" --timeout 600
+  ctest --test-dir "$build_dir" -LE 'bench|soak' --output-on-failure -j "$(nproc)" --timeout 600
+  # Every fuzz target for a few seconds, replaying its committed regression inputs first.
+  say "fuzzing every decoder briefly (deploy/fuzz.sh)"
+  "$here/fuzz.sh" build
+  "$here/fuzz.sh" run --seconds 5
 }
 
 run_main() {

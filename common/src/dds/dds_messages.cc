@@ -76,6 +76,14 @@ ZstdContexts& zstd_contexts() {
 
 }  // namespace
 
+namespace {
+std::atomic<std::uint64_t> g_undecodable{0};
+}  // namespace
+
+std::uint64_t undecodable_samples() { return g_undecodable.load(std::memory_order_relaxed); }
+
+void count_undecodable_sample() { g_undecodable.fetch_add(1, std::memory_order_relaxed); }
+
 std::string_view drop_reason_name(DropReason reason) {
   switch (reason) {
     case DropReason::kOk:
@@ -88,6 +96,8 @@ std::string_view drop_reason_name(DropReason reason) {
       return "bad_shape";
     case DropReason::kBadChecksum:
       return "bad_checksum";
+    case DropReason::kDuplicate:
+      return "duplicate";
   }
   return "unknown";
 }

@@ -11,6 +11,8 @@
 // A writer fills the fields, then calls seal(msg) to set schema_version and checksum.
 #pragma once
 
+#include <fastcdr/exceptions/Exception.h>
+
 #include <array>
 #include <atomic>
 #include <cstddef>
@@ -43,8 +45,9 @@ enum class DropReason : int {
   kWrongRun = 2,
   kBadShape = 3,
   kBadChecksum = 4,
+  kDuplicate = 5,  // a chunk the learner already stored (learner/ingest.h, DuplicateFilter)
 };
-inline constexpr int kNumDropReasons = 5;
+inline constexpr int kNumDropReasons = 6;
 
 // Short lowercase name of a reason, e.g. "bad_checksum".
 std::string_view drop_reason_name(DropReason reason);
@@ -64,7 +67,8 @@ class DropCounters {
   std::uint64_t count(DropReason reason) const;
   // Number of dropped messages over all reasons (accepted ones excluded).
   std::uint64_t dropped() const;
-  // One line such as "accepted=10 wrong_schema=0 wrong_run=1 bad_shape=0 bad_checksum=2".
+  // One line such as
+  // "accepted=10 wrong_schema=0 wrong_run=1 bad_shape=0 bad_checksum=2 duplicate=0".
   std::string summary() const;
 
  private:
@@ -113,6 +117,29 @@ std::vector<std::uint8_t> decompress_frames(std::span<const std::uint8_t> compre
 // Decompresses chunk.frames_zstd; returns (num_steps, image_height, image_width) uint8.
 std::vector<std::uint8_t> decompress_frames(const msg::TrajectoryChunk& chunk);
 
+// Samples whose bytes did not decode as their type, over all topics of this process.
+std::uint64_t undecodable_samples();
+void count_undecodable_sample();
+
+// The generated PubSubTypes catch only fastcdr's NotEnoughMemoryException while decoding. Any
+// other decoding error (a first byte that is no encapsulation, a boolean other than 0 or 1)
+// escaped from DataReader::take into the listener and ended the process: one bad sample from
+// anyone on the domain stopped a learner (found by tests/fuzz, target chunk). This wrapper,
+// registered for every topic, turns every decoding failure into `false`, which Fast DDS
+// handles by dropping the sample, and counts it (undecodable_samples()).
+template <typename Generated>
+class GuardedPubSubType : public Generated {
+ public:
+  bool deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) override {
+    try {
+      if (Generated::deserialize(payload, data)) return true;
+    } catch (const eprosima::fastcdr::exception::Exception&) {
+    }
+    count_undecodable_sample();
+    return false;
+  }
+};
+
 // Static description of a message type on the wire: its topic and its XML QoS profile names.
 template <typename T>
 struct TopicTraits;
@@ -120,7 +147,7 @@ struct TopicTraits;
 #define INDRIVE_DDS_TOPIC(Type, topic, profile)                      \
   template <>                                                        \
   struct TopicTraits<msg::Type> {                                    \
-    using PubSubType = msg::Type##PubSubType;                        \
+    using PubSubType = GuardedPubSubType<msg::Type##PubSubType>;     \
     static constexpr const char* kTopic = topic;                     \
     static constexpr const char* kWriterProfile = profile "_writer"; \
     static constexpr const char* kReaderProfile = profile "_reader"; \
