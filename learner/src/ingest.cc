@@ -50,4 +50,16 @@ dds::DropReason decode_chunk(const msg::TrajectoryChunk& chunk, const IngestOpti
   return dds::DropReason::kOk;
 }
 
+bool DuplicateFilter::first_time(const msg::TrajectoryChunk& chunk) {
+  const Key key{chunk.actor_id(), chunk.chunk_seq(), chunk.episode_id(), chunk.checksum()};
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!seen_.insert(key).second) return false;
+  order_.push_back(key);
+  if (order_.size() > capacity_) {
+    seen_.erase(order_.front());
+    order_.pop_front();
+  }
+  return true;
+}
+
 }  // namespace indrive::learner

@@ -310,7 +310,10 @@ struct Learner::Impl {
   // DDS thread: decode and queue; the acting thread owns the replay buffer.
   void on_chunk(const msg::TrajectoryChunk& chunk) {
     DecodedChunk decoded;
-    const dds::DropReason reason = decode_chunk(chunk, ingest, decoded);
+    dds::DropReason reason = decode_chunk(chunk, ingest, decoded);
+    if (reason == dds::DropReason::kOk && !stored_chunks.first_time(chunk)) {
+      reason = dds::DropReason::kDuplicate;
+    }
     drops.record(reason);
     if (reason != dds::DropReason::kOk) {
       INDRIVE_LOG(kWarn, "learner")
@@ -495,6 +498,7 @@ struct Learner::Impl {
     const double lag = interval_chunks > 0 ? interval_lag_sum / interval_chunks : 0.0;
     nlohmann::json record = {{"env_steps", stats.counters.env_steps},
                              {"updates", stats.counters.updates},
+                             {"learner_epoch", stats.counters.learner_epoch},
                              {"env_steps_per_s", steps / std::max(elapsed, 1e-9)},
                              {"updates_per_s", updates / std::max(elapsed, 1e-9)},
                              {"replay_ratio", ratio},
@@ -510,6 +514,8 @@ struct Learner::Impl {
                              {"dropped_bad_checksum", drops.count(dds::DropReason::kBadChecksum)},
                              {"dropped_bad_shape", drops.count(dds::DropReason::kBadShape)},
                              {"dropped_wrong_schema", drops.count(dds::DropReason::kWrongSchema)},
+                             {"dropped_duplicate", drops.count(dds::DropReason::kDuplicate)},
+                             {"dropped_undecodable", dds::undecodable_samples()},
                              {"sequence_gaps", stats.sequence_gaps},
                              {"failed_updates", stats.failed_updates},
                              {"episodes", episodes},
@@ -627,6 +633,7 @@ struct Learner::Impl {
   std::unique_ptr<dds::Reader<msg::SnapshotRequest>> request_reader;
 
   dds::DropCounters drops;
+  DuplicateFilter stored_chunks;  // chunks stored so far: a repeat is dropped
   std::mutex queue_mutex;
   std::deque<DecodedChunk> queue;
   std::uint64_t interval_episodes = 0, interval_successes = 0;

@@ -106,5 +106,35 @@ TEST(IngestTest, ForeignCorruptAndMisshapenChunksAreDroppedWithTheirReason) {
             dds::DropReason::kBadShape);
 }
 
+// Sizes a chunk claims are checked against what it carries before anything is allocated.
+TEST(IngestTest, ChunksClaimingMoreThanTheyCarryAreRejectedBeforeDecompressing) {
+  DecodedChunk decoded;
+  auto many_steps = make_chunk(3);
+  many_steps.num_steps(1000000000u);  // a billion frames in three steps' arrays
+  dds::seal(many_steps);
+  EXPECT_EQ(decode_chunk(many_steps, pretrain_options(), decoded), dds::DropReason::kBadShape);
+
+  // A zstd frame that holds more than L * H * W (its header says so) is not decompressed.
+  auto bigger = make_chunk(3);
+  bigger.frames_zstd() = dds::compress_frames(std::vector<std::uint8_t>(300 * kSide * kSide, 3));
+  dds::seal(bigger);
+  EXPECT_EQ(decode_chunk(bigger, pretrain_options(), decoded), dds::DropReason::kBadShape);
+}
+
+TEST(DuplicateFilterTest, ARepeatedChunkIsCaughtAndARestartedActorsChunksAreNot) {
+  DuplicateFilter filter(/*capacity=*/3);
+  const auto chunk = make_chunk(5);
+  EXPECT_TRUE(filter.first_time(chunk));
+  EXPECT_FALSE(filter.first_time(chunk)) << "the same chunk again";
+  // A restarted actor numbers from 0 again, with other frames: the checksum tells it apart.
+  const auto other = make_chunk(5, false, /*class_id=*/4);
+  ASSERT_EQ(other.chunk_seq(), chunk.chunk_seq());
+  EXPECT_TRUE(filter.first_time(other));
+  // Only the newest `capacity` are remembered.
+  EXPECT_TRUE(filter.first_time(make_chunk(4)));
+  EXPECT_TRUE(filter.first_time(make_chunk(3)));
+  EXPECT_TRUE(filter.first_time(chunk)) << "forgotten after three newer ones";
+}
+
 }  // namespace
 }  // namespace indrive::learner

@@ -123,6 +123,7 @@ ProcessWatch::ProcessWatch(int domain_id, const fs::path& profiles_file) {
         SeenSnapshot seen{.version = snapshot.version(),
                           .updates = snapshot.updates(),
                           .bytes = snapshot.params().size(),
+                          .checksum = snapshot.checksum(),
                           .time_s = now_s()};
         std::lock_guard<std::mutex> lock(mutex_);
         snapshots_.push_back(seen);

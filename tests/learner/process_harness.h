@@ -66,6 +66,7 @@ struct SeenSnapshot {
   std::uint64_t version = 0;
   std::uint64_t updates = 0;
   std::size_t bytes = 0;
+  std::uint32_t checksum = 0;
   double time_s = 0.0;
 };
 

@@ -1,5 +1,6 @@
 #include "indrive/common/agent/replay.h"
 
+#include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -36,6 +37,7 @@ class Reader {
     pos_ += n;
   }
   std::size_t pos() const { return pos_; }
+  std::size_t remaining() const { return end_ - pos_; }
 
  private:
   const std::string& data_;
@@ -220,7 +222,10 @@ void ReplayBuffer::load(const std::filesystem::path& path) {
         (options_.has_rewards ? " with" : " without") + " rewards (another preset or phase?)");
   }
   const std::int64_t total_added = in.get<std::int64_t>();
-  std::string rng_state(in.get<std::uint64_t>(), '\0');
+  // Sizes read from the file are checked against the bytes left before anything is allocated.
+  const std::uint64_t rng_size = in.get<std::uint64_t>();
+  if (rng_size > in.remaining()) throw ReplayError("replay file " + name + " is truncated");
+  std::string rng_state(rng_size, '\0');
   in.bytes(rng_state.data(), rng_state.size());
   std::map<int, std::deque<Stored>> streams;
   std::int64_t size = 0;
@@ -238,8 +243,15 @@ void ReplayBuffer::load(const std::filesystem::path& path) {
       stored.step.is_first = flags & 1, stored.step.is_last = flags & 2,
       stored.step.is_terminal = flags & 4;
       stored.step.reward = in.get<float>();
+      if (in.remaining() < pixels) throw ReplayError("replay file " + name + " is truncated");
       stored.step.frame.resize(pixels);
       in.bytes(stored.step.frame.data(), pixels);
+      // What add() refuses may not enter by a file either: the sampler trusts these ranges.
+      if (stored.step.action < 0 || stored.step.action >= options_.num_actions ||
+          std::any_of(stored.step.frame.begin(), stored.step.frame.end(),
+                      [&](std::uint8_t id) { return id >= options_.num_classes; })) {
+        throw ReplayError("replay file " + name + " holds an action or class id out of range");
+      }
       steps.push_back(std::move(stored));
       ++size;
     }

@@ -2,9 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <fstream>
 #include <set>
 
+#include "indrive/common/checksum.h"
+#include "indrive/common/run_dir.h"
 #include "testing.h"
 
 namespace indrive::agent {
@@ -146,6 +149,38 @@ TEST(Replay, LoadRejectsCorruptOrForeignFiles) {
   EXPECT_THROW(b.load(path), ReplayError);
   EXPECT_THROW(b.load(dir.path() / "missing.bin"), ReplayError);
   EXPECT_EQ(b.size(), 0);
+}
+
+TEST(Replay, LoadRefusesWhatAddRefusesAndSizesBeyondTheFile) {
+  indrive::testing::TempDir dir;
+  ReplayBuffer a(small_options());
+  for (int i = 0; i < 9; ++i) a.add(0, make_step(i));  // actions 0..8, class ids 0..7
+  const auto path = dir.path() / "replay.bin";
+  a.save(path);
+  // Actions or class ids the sampler would hand out of range never load.
+  ReplayOptions fewer_actions = small_options();
+  fewer_actions.num_actions = 4;
+  ReplayBuffer b(fewer_actions);
+  EXPECT_THROW(b.load(path), ReplayError);
+  ReplayOptions fewer_classes = small_options();
+  fewer_classes.num_classes = 4;
+  ReplayBuffer c(fewer_classes);
+  EXPECT_THROW(c.load(path), ReplayError);
+  // A size field claiming 10^15 bytes (checksum made to match) is refused before allocating:
+  // the RNG state's length sits after magic, version, height, width, rewards and total_added.
+  auto bytes = read_file(path);
+  const std::uint64_t huge = 1000000000000000ull;
+  std::memcpy(bytes.data() + 25, &huge, 8);
+  const std::uint32_t crc = crc32(bytes.data(), bytes.size() - 4);
+  std::memcpy(bytes.data() + bytes.size() - 4, &crc, 4);
+  atomic_write(path, bytes);
+  ReplayBuffer d(small_options());
+  try {
+    d.load(path);
+    ADD_FAILURE() << "a replay file with an impossible size loaded";
+  } catch (const ReplayError& error) {
+    EXPECT_NE(std::string(error.what()).find("truncated"), std::string::npos) << error.what();
+  }
 }
 
 }  // namespace

@@ -11,7 +11,11 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
+#include <mutex>
+#include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "indrive/common/agent/replay.h"
@@ -43,5 +47,24 @@ struct DecodedChunk {
 // unspecified). Never throws on malformed data.
 dds::DropReason decode_chunk(const msg::TrajectoryChunk& chunk, const IngestOptions& options,
                              DecodedChunk& out);
+
+// Remembers the chunks a learner stored, so that one arriving again (a sender or a network that
+// repeats a sample) is dropped as kDuplicate instead of entering replay twice. A chunk is the
+// same when actor, sequence number, episode and checksum all agree: a restarted actor numbers
+// its chunks from 0 again, but its frames and so its checksum differ. Holds the newest
+// `capacity` chunks (far more than can be in flight). Thread-safe.
+class DuplicateFilter {
+ public:
+  explicit DuplicateFilter(std::size_t capacity = 1 << 16) : capacity_(capacity) {}
+  // True the first time a chunk is offered (it is then remembered), false for a repeat.
+  bool first_time(const msg::TrajectoryChunk& chunk);
+
+ private:
+  using Key = std::tuple<std::uint32_t, std::uint64_t, std::uint64_t, std::uint32_t>;
+  std::size_t capacity_;
+  std::mutex mutex_;
+  std::set<Key> seen_;
+  std::deque<Key> order_;
+};
 
 }  // namespace indrive::learner

@@ -1,0 +1,323 @@
+// Chaos soak: the launcher's run on the smoke config while a driver kills a random process
+// (learner, an actor, the evaluator) with SIGKILL at random intervals and puts damaged,
+// foreign, misshapen and repeated chunks on the trajectory topic. At the end the run's
+// invariants must hold:
+//   - policy versions strictly rise over the whole run (learner restarts included) and no
+//     version is published with two different contents;
+//   - every chunk the learner received from the driver is counted by its reason, a repeated
+//     chunk as `duplicate` (it never enters replay twice), checked exactly over the final
+//     learner's lifetime;
+//   - the replay ratio of the run is within 5% of its target;
+//   - the run ends by its budget, the evaluator evaluates the final snapshot and the report is
+//     written.
+// The short version (label integration, in the test command) runs until 80% of a 3,000-step
+// budget; INDRIVE_SOAK_BUDGET sets a longer one (the `soak` label runs 30,000 steps) and
+// INDRIVE_SOAK_SEED the kill schedule.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+#include <string>
+#include <thread>
+
+#include "indrive/actor/chunk_builder.h"
+#include "indrive/common/agent/config.h"
+#include "process_harness.h"
+#include "testing.h"
+
+namespace indrive {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+using testing::Child;
+using testing::ProcessWatch;
+using testing::wait_until;
+
+constexpr std::uint32_t kDriverActor = 90;  // actor id of the driver's own chunks
+// The smoke config's ratio is 32; 8 keeps the learner's share of a loaded 2-core CI machine
+// small enough that the short version ends in a few minutes.
+constexpr double kReplayRatio = 8.0;
+
+std::int64_t env_int(const char* name, std::int64_t fallback) {
+  const char* text = std::getenv(name);
+  return text != nullptr && *text != 0 ? std::stoll(text) : fallback;
+}
+
+// The driver's chunks: valid ones of this run and this model's frame size, then damaged copies.
+class ChunkForge {
+ public:
+  ChunkForge(std::string run_id, int side) : run_id_(std::move(run_id)), side_(side) {}
+
+  msg::TrajectoryChunk valid() {
+    actor::ChunkBuilder builder({.run_id = run_id_,
+                                 .actor_id = kDriverActor,
+                                 .height = side_,
+                                 .width = side_,
+                                 .chunk_length = 4,
+                                 .phase = msg::PHASE_PRETRAIN});
+    for (std::uint64_t t = 0; t < 4; ++t) {
+      std::vector<std::uint8_t> frame(static_cast<std::size_t>(side_ * side_),
+                                      static_cast<std::uint8_t>((t + serial_) % 8));
+      builder.add({.frame = frame,
+                   .action = static_cast<int>(t % 9),
+                   .is_first = t == 0,
+                   .episode_id = serial_,
+                   .episode_step = t});
+    }
+    ++serial_;
+    return builder.take();
+  }
+  msg::TrajectoryChunk bad_checksum() {
+    auto chunk = valid();
+    chunk.frames_zstd()[chunk.frames_zstd().size() / 2] ^= 0x5a;  // not re-sealed
+    return chunk;
+  }
+  msg::TrajectoryChunk wrong_run() {
+    auto chunk = valid();
+    chunk.run_id("another-run");
+    dds::seal(chunk);
+    return chunk;
+  }
+  msg::TrajectoryChunk bad_shape() {
+    auto chunk = valid();
+    chunk.actions()[1] = 200;  // no such action; sealed, so only the shape check can tell
+    dds::seal(chunk);
+    return chunk;
+  }
+
+ private:
+  std::string run_id_;
+  int side_;
+  std::uint64_t serial_ = 0;
+};
+
+std::vector<nlohmann::json> learner_lines(const fs::path& run_dir) {
+  std::vector<nlohmann::json> lines;
+  for (auto& line : testing::read_metrics(run_dir / "metrics.jsonl")) {
+    if (line.contains("dropped_chunks")) lines.push_back(std::move(line));
+  }
+  return lines;
+}
+
+TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
+  const int domain = testing::unique_domain_id();
+  const fs::path profile = testing::source_path("deploy/dds/single_host.xml");
+  testing::TempDir dir("indrive-soak");
+  const fs::path run_dir = dir.path() / "runs" / "soak";
+  const std::int64_t budget = env_int("INDRIVE_SOAK_BUDGET", 3000);
+  const auto seed = static_cast<std::uint64_t>(env_int("INDRIVE_SOAK_SEED", 1));
+  const int side = agent::preset("tiny").world_model.image;
+
+  ProcessWatch watch(domain, profile);
+  auto writer = watch.participant().make_writer<msg::TrajectoryChunk>();
+  Child launcher({std::string(INDRIVE_BIN_DIR) + "/indrive",
+                  "launch",
+                  "--config",
+                  testing::source_path("deploy/configs/smoke.yaml").string(),
+                  "--run-id",
+                  "soak",
+                  "--runs-dir",
+                  (dir.path() / "runs").string(),
+                  "--actors",
+                  "2",
+                  "--evaluators",
+                  "1",
+                  "--domain",
+                  std::to_string(domain),
+                  "--dds-profile",
+                  profile.string(),
+                  "--set",
+                  "run.budget_env_steps=" + std::to_string(budget),
+                  "--set",
+                  "learner.replay_ratio=" + std::to_string(static_cast<int>(kReplayRatio)),
+                  "--set",
+                  "learner.checkpoint_minutes=0.1",
+                  "--set",
+                  "learner.log_interval_s=1",
+                  "--set",
+                  "eval.routes=straight",
+                  "--status-interval",
+                  "5"},
+                 dir.path() / "launch.log");
+  const auto logs = [&] {
+    std::string text;
+    for (const char* name : {"learner.log", "actor-0.log", "actor-1.log", "evaluator-0.log"}) {
+      std::string body = testing::slurp(run_dir / "logs" / name);
+      if (body.size() > 3000) body = "...\n" + body.substr(body.size() - 3000);
+      text += std::string("----- ") + name + "\n" + body;
+    }
+    return text;
+  };
+  const auto learner_steps = [&] {
+    testing::SeenHeartbeat beat;
+    return watch.heartbeat(msg::ROLE_LEARNER, 0, beat) ? static_cast<std::int64_t>(beat.env_steps)
+                                                       : std::int64_t{0};
+  };
+  ASSERT_TRUE(wait_until(120s, [&] {
+    return watch.min_newest_chunk_version({0, 1}) >= 1;
+  })) << logs();
+
+  // The processes of a role under the launcher: {args that name it}, minus the evaluator for
+  // an actor id (both carry --id).
+  const std::string learner_program = std::string(INDRIVE_BIN_DIR) + "/indrive-learner";
+  const auto pids_of = [&](const std::string& role) {
+    if (role == "learner") return testing::child_pids(launcher.pid(), {learner_program});
+    if (role == "evaluator") return testing::child_pids(launcher.pid(), {"--evaluate"});
+    auto pids = testing::child_pids(launcher.pid(), {"--id", role.substr(6)});
+    const auto evaluators = testing::child_pids(launcher.pid(), {"--evaluate"});
+    std::erase_if(pids, [&](pid_t pid) {
+      return std::find(evaluators.begin(), evaluators.end(), pid) != evaluators.end();
+    });
+    return pids;
+  };
+  // Kills a role may take: the launcher restarts the learner 10 times and the evaluator 5.
+  std::map<std::string, int> kill_budget = {
+      {"learner", 8}, {"actor-0", 1000}, {"actor-1", 1000}, {"evaluator", 4}};
+  std::map<std::string, int> kills;
+  std::vector<double> recover_s;
+  std::mt19937_64 rng(seed);
+  ChunkForge forge("soak", side);
+  std::map<std::string, int> injected;
+  const auto inject = [&](const std::string& kind) {
+    if (kind == "bad_checksum") writer->write(forge.bad_checksum());
+    if (kind == "wrong_run") writer->write(forge.wrong_run());
+    if (kind == "bad_shape") writer->write(forge.bad_shape());
+    if (kind == "duplicate") {
+      const auto chunk = forge.valid();
+      writer->write(chunk);
+      writer->write(chunk);
+    }
+    ++injected[kind];
+  };
+  const std::vector<std::string> kinds = {"bad_checksum", "wrong_run", "bad_shape", "duplicate"};
+
+  const double chaos_start = watch.now_s();
+  double next_kill = chaos_start + 3.0;
+  while (learner_steps() < budget * 8 / 10 && watch.now_s() - chaos_start < 1800.0) {
+    ASSERT_TRUE(launcher.running()) << "the launcher gave up\n" << logs();
+    inject(kinds[rng() % kinds.size()]);
+    if (watch.now_s() >= next_kill) {
+      std::vector<std::string> roles;
+      for (const auto& [role, left] : kill_budget) {
+        if (kills[role] < left && pids_of(role).size() == 1) roles.push_back(role);
+      }
+      if (!roles.empty()) {
+        const std::string role = roles[rng() % roles.size()];
+        const pid_t victim = pids_of(role)[0];
+        ASSERT_EQ(::kill(victim, SIGKILL), 0);
+        ++kills[role];
+        const double killed_at = watch.now_s();
+        // Recovered: the launcher runs a new process of the role (its back-off grows with
+        // consecutive failures, up to 30 s).
+        const bool back = wait_until(90s, [&] {
+          const auto now = pids_of(role);
+          return now.size() == 1 && now[0] != victim;
+        });
+        ASSERT_TRUE(back) << role << " was not restarted\n" << logs();
+        recover_s.push_back(watch.now_s() - killed_at);
+      }
+      next_kill = watch.now_s() + 3.0 + static_cast<double>(rng() % 5000) / 1000.0;
+    }
+    std::this_thread::sleep_for(500ms);
+  }
+  const double chaos_minutes = (watch.now_s() - chaos_start) / 60.0;
+
+  // Exact accounting over the final learner's lifetime: once it has run a while and written a
+  // metrics line, each kind of bad chunk goes out 5 times and must be counted 5 times more.
+  // Matched: the watch's own reader and the learner's.
+  ASSERT_TRUE(wait_until(120s, [&] {
+    return writer->matched() >= 2 && !learner_lines(run_dir).empty();
+  })) << logs();
+  writer->wait_for_acknowledgments(10000ms);
+  std::this_thread::sleep_for(1500ms);  // a metrics line after the last chaos chunk
+  const auto before = learner_lines(run_dir).back();
+  for (int i = 0; i < 5; ++i) {
+    for (const auto& kind : kinds) inject(kind);
+  }
+  ASSERT_TRUE(writer->wait_for_acknowledgments(20000ms)) << logs();
+  nlohmann::json after;
+  ASSERT_TRUE(wait_until(30s,
+                         [&] {
+                           const auto lines = learner_lines(run_dir);
+                           after = lines.back();
+                           return after.value("dropped_duplicate", 0) >=
+                                      before.value("dropped_duplicate", 0) + 5 &&
+                                  after.value("dropped_bad_checksum", 0) >=
+                                      before.value("dropped_bad_checksum", 0) + 5;
+                         }))
+      << "before: " << before.dump() << "\nnow: " << after.dump() << "\n"
+      << logs();
+  ASSERT_EQ(after.value("learner_epoch", 0), before.value("learner_epoch", 0))
+      << "the learner restarted during the exact check";
+  for (const char* key :
+       {"dropped_bad_checksum", "dropped_wrong_run", "dropped_bad_shape", "dropped_duplicate"}) {
+    EXPECT_EQ(after.value(key, 0) - before.value(key, 0), 5) << key;
+  }
+
+  // The run ends by its budget; the evaluator evaluates the final snapshot.
+  EXPECT_EQ(launcher.wait(600s), 0) << logs();
+
+  // Policy versions strictly rise, one content per version.
+  const auto snapshots = watch.snapshots();
+  ASSERT_FALSE(snapshots.empty());
+  std::map<std::uint64_t, std::uint32_t> content;
+  std::uint64_t newest = 0;
+  int out_of_order = 0, two_contents = 0;
+  for (const auto& snapshot : snapshots) {
+    const auto [it, fresh] = content.emplace(snapshot.version, snapshot.checksum);
+    if (!fresh) {
+      if (it->second != snapshot.checksum) ++two_contents;
+      continue;  // a re-published or re-requested copy of one version
+    }
+    if (snapshot.version <= newest) ++out_of_order;
+    newest = std::max(newest, snapshot.version);
+  }
+  EXPECT_EQ(out_of_order, 0) << "versions must strictly rise";
+  EXPECT_EQ(two_contents, 0) << "a version must have one content";
+
+  // The replay ratio of the run as a whole.
+  const auto lines = learner_lines(run_dir);
+  ASSERT_FALSE(lines.empty());
+  const double ratio = lines.back().value("replay_ratio", 0.0);
+  EXPECT_NEAR(ratio, kReplayRatio, 0.05 * kReplayRatio) << lines.back().dump();
+
+  // The report of the final evaluation.
+  const fs::path report_dir = dir.path() / "report";
+  Child report({std::string(INDRIVE_BIN_DIR) + "/indrive", "report", run_dir.string(), "--out",
+                report_dir.string()},
+               dir.path() / "report.log");
+  EXPECT_EQ(report.wait(60s), 0) << testing::slurp(dir.path() / "report.log");
+  EXPECT_TRUE(fs::exists(report_dir / "report.md"));
+
+  std::uint64_t dropped = 0;
+  for (const char* key : {"dropped_bad_checksum", "dropped_wrong_run", "dropped_bad_shape",
+                          "dropped_duplicate", "dropped_wrong_schema"}) {
+    dropped += lines.back().value(key, std::uint64_t{0});
+  }
+  double worst_recovery = 0.0;
+  for (double s : recover_s) worst_recovery = std::max(worst_recovery, s);
+  int injected_total = 0;
+  for (const auto& [kind, count] : injected) injected_total += count;
+  std::printf(
+      "[figures] chaos soak (seed %llu, budget %lld steps): %.2f min of chaos; kills learner %d, "
+      "actor-0 %d, actor-1 %d, evaluator %d, all %zu recovered (slowest restart %.1f s); %d bad "
+      "or repeated chunks sent (%d bad_checksum, %d wrong_run, %d bad_shape, %d duplicate "
+      "pairs); versions v1..v%llu strictly rising; final replay ratio %.3f (target %.0f); final "
+      "learner counted %llu drops; exact check: +5 of each reason\n",
+      static_cast<unsigned long long>(seed), static_cast<long long>(budget), chaos_minutes,
+      kills["learner"], kills["actor-0"], kills["actor-1"], kills["evaluator"], recover_s.size(),
+      worst_recovery, injected_total, injected["bad_checksum"], injected["wrong_run"],
+      injected["bad_shape"], injected["duplicate"], static_cast<unsigned long long>(newest), ratio,
+      kReplayRatio, static_cast<unsigned long long>(dropped));
+}
+
+}  // namespace
+}  // namespace indrive
