@@ -182,6 +182,7 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
   std::map<std::string, int> kill_budget = {
       {"learner", 8}, {"actor-0", 1000}, {"actor-1", 1000}, {"evaluator", 4}};
   std::map<std::string, int> kills;
+  std::vector<std::string> round;  // roles still to kill in this round
   std::vector<double> recover_s;
   std::mt19937_64 rng(seed);
   ChunkForge forge("soak", side);
@@ -205,12 +206,17 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
     ASSERT_TRUE(launcher.running()) << "the launcher gave up\n" << logs();
     inject(kinds[rng() % kinds.size()]);
     if (watch.now_s() >= next_kill) {
-      std::vector<std::string> roles;
-      for (const auto& [role, left] : kill_budget) {
-        if (kills[role] < left && pids_of(role).size() == 1) roles.push_back(role);
+      // Victims come in rounds: every role once per round, in a random order, so that even the
+      // short version kills each role.
+      if (round.empty()) {
+        for (const auto& [role, left] : kill_budget) {
+          if (kills[role] < left) round.push_back(role);
+        }
+        std::shuffle(round.begin(), round.end(), rng);
       }
-      if (!roles.empty()) {
-        const std::string role = roles[rng() % roles.size()];
+      if (!round.empty() && pids_of(round.back()).size() == 1) {
+        const std::string role = round.back();
+        round.pop_back();
         const pid_t victim = pids_of(role)[0];
         ASSERT_EQ(::kill(victim, SIGKILL), 0);
         ++kills[role];
