@@ -26,6 +26,12 @@ std::vector<RouteSpec> read_route_file(const std::filesystem::path& path) {
   std::vector<RouteSpec> specs;
   for (const auto& entry : root) {
     RouteSpec spec;
+    // YAML allows lists and maps as keys ("? [a, b]: ..."); a route name is plain text.
+    if (!entry.first.IsScalar()) {
+      throw RouteError("route file '" + path.string() + "': line " +
+                       std::to_string(entry.first.Mark().line + 1) +
+                       ": a route name must be plain text (straight, right_loop, ...)");
+    }
     spec.name = entry.first.as<std::string>();
     const YAML::Node& body = entry.second;
     try {

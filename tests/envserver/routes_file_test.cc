@@ -51,6 +51,9 @@ TEST(RoutesFileTest, BrokenFiles) {
   EXPECT_THAT(read_error(dir.path() / "d.yaml"), HasSubstr("route 'straight'"));
   std::ofstream(dir.path() / "e.yaml") << "straight: {edges: []}\n";
   EXPECT_THAT(read_error(dir.path() / "e.yaml"), HasSubstr("empty 'edges' list"));
+  // A list as a key (found by tests/fuzz, target routes: it escaped as a yaml-cpp exception).
+  std::ofstream(dir.path() / "f.yaml") << "? [a, b]\n: {edges: [x]}\n";
+  EXPECT_THAT(read_error(dir.path() / "f.yaml"), HasSubstr("a route name must be plain text"));
 }
 
 }  // namespace

@@ -450,6 +450,11 @@ void Config::apply_yaml(std::string_view yaml_text, std::string_view origin, boo
   // Walk nested maps; "a: {b: 1}" and "a.b: 1" both set key "a.b".
   auto walk = [&](auto&& self, const YAML::Node& map, const std::string& prefix) -> void {
     for (const auto& item : map) {
+      // YAML allows lists and maps as keys ("? [a, b]: 1"); a config key is a plain name.
+      if (!item.first.IsScalar()) {
+        throw ConfigError(node_origin(origin, item.first) +
+                          ": a key must be a plain name such as 'learner.replay_ratio'");
+      }
       const std::string name = prefix + item.first.as<std::string>();
       const YAML::Node& value = item.second;
       const std::string where = node_origin(origin, item.first);

@@ -98,6 +98,15 @@ TEST(Config, UnknownKeySuggestsClosest) {
       << far;
 }
 
+// Found by tests/fuzz (target config): a list as a key escaped as a yaml-cpp exception.
+TEST(Config, AKeyThatIsNotAPlainNameIsAConfigError) {
+  const Schema schema = toy_schema();
+  const std::string message = error_of(schema, "? [replay, capacity]\n: 5\n");
+  EXPECT_NE(message.find("a key must be a plain name"), std::string::npos) << message;
+  const std::string nested = error_of(schema, "train:\n  ? {a: 1}\n  : 2\n");
+  EXPECT_NE(nested.find("a key must be a plain name"), std::string::npos) << nested;
+}
+
 TEST(Config, WrongTypeNamesKeyAndExpectedType) {
   const Schema schema = toy_schema();
   std::string message = error_of(schema, "replay:\n  capacity: lots\n");
