@@ -2,9 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <fstream>
+#include <iterator>
 #include <set>
 
+#include "indrive/common/checksum.h"
 #include "testing.h"
 
 namespace indrive::agent {
@@ -146,6 +149,55 @@ TEST(Replay, LoadRejectsCorruptOrForeignFiles) {
   EXPECT_THROW(b.load(path), ReplayError);
   EXPECT_THROW(b.load(dir.path() / "missing.bin"), ReplayError);
   EXPECT_EQ(b.size(), 0);
+}
+
+TEST(Replay, BytesAreTheFileAndLoadFromMemory) {
+  indrive::testing::TempDir dir;
+  ReplayBuffer a(small_options());
+  for (int i = 0; i < 5; ++i) a.add(0, make_step(i, i == 0));
+  a.save(dir.path() / "replay.bin");
+  std::ifstream file(dir.path() / "replay.bin", std::ios::binary);
+  const std::vector<std::uint8_t> on_disk((std::istreambuf_iterator<char>(file)),
+                                          std::istreambuf_iterator<char>());
+  const std::vector<std::uint8_t> bytes = a.to_bytes();
+  EXPECT_EQ(bytes, on_disk);
+  ReplayBuffer b(small_options());
+  b.load(bytes, "memory");
+  EXPECT_EQ(b.size(), 5);
+  EXPECT_EQ(b.sample(4, 2).frames, a.sample(4, 2).frames);
+  auto damaged = bytes;
+  damaged[30] ^= 0x01;
+  ReplayBuffer c(small_options());
+  try {
+    c.load(damaged, "memory");
+    FAIL() << "a damaged buffer loaded";
+  } catch (const ReplayError& error) {
+    EXPECT_NE(std::string(error.what()).find("replay file memory is corrupt"), std::string::npos)
+        << error.what();
+  }
+  EXPECT_EQ(c.size(), 0);
+}
+
+// A size field near 2^64 (with the checksum made to match, as a crafted file would) is refused
+// as truncation: neither allocated nor wrapped around past the bounds check.
+TEST(Replay, AHugeSizeFieldIsTruncationNotAnAllocation) {
+  ReplayBuffer a(small_options());
+  a.add(0, make_step(1, true));
+  auto bytes = a.to_bytes();
+  // magic 4, version 4, height 4, width 4, rewards 1, total added 8: the RNG state's size.
+  constexpr std::size_t kRngSizeAt = 25;
+  for (const std::uint64_t size : {std::uint64_t{1000000000000000}, ~std::uint64_t{0} - 8}) {
+    std::memcpy(bytes.data() + kRngSizeAt, &size, sizeof size);
+    const std::uint32_t crc = indrive::crc32(bytes.data(), bytes.size() - 4);
+    std::memcpy(bytes.data() + bytes.size() - 4, &crc, sizeof crc);
+    ReplayBuffer b(small_options());
+    try {
+      b.load(bytes, "crafted");
+      FAIL() << "a size of " << size << " loaded";
+    } catch (const ReplayError& error) {
+      EXPECT_NE(std::string(error.what()).find("truncated"), std::string::npos) << error.what();
+    }
+  }
 }
 
 }  // namespace
