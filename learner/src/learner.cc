@@ -2,6 +2,8 @@
 
 #include <zstd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -15,6 +17,7 @@
 
 #include "indrive/common/agent/agent.h"
 #include "indrive/common/check.h"
+#include "indrive/common/checksum.h"
 #include "indrive/common/dds.h"
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
@@ -27,9 +30,13 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 // Version 1 holds counters and agent bytes; version 2 adds the sizes of its sections and the
-// zstd-compressed replay file.
-constexpr std::string_view kCheckpointMagicV1 = "INDRIVE-LEARNER-CHECKPOINT 1\n";
-constexpr std::string_view kCheckpointMagic = "INDRIVE-LEARNER-CHECKPOINT 2\n";
+// zstd-compressed replay file; version 3 adds a trailer with a CRC-32 of every byte before it,
+// so that damage to the counters line (which has no checksum of its own) is noticed too.
+constexpr std::string_view kCheckpointMagicPrefix = "INDRIVE-LEARNER-CHECKPOINT ";
+constexpr int kCheckpointVersion = 3;
+// "CRC32 " + 8 lowercase hex digits + "\n": fixed-size, so it is found from the end of the file.
+constexpr std::string_view kTrailerTag = "CRC32 ";
+constexpr std::size_t kTrailerSize = kTrailerTag.size() + 8 + 1;
 // Replay holds class-id frames: a fast level already shrinks them many times over.
 constexpr int kReplayZstdLevel = 1;
 // Versions are reserved in blocks written to this file before any of them is published, so a
@@ -43,6 +50,79 @@ double seconds_since(Clock::time_point start) {
 
 double unix_time_s() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+std::string checkpoint_trailer(std::uint32_t crc) {
+  char text[16];
+  std::snprintf(text, sizeof text, "%08x", crc);
+  return std::string(kTrailerTag) + text + "\n";
+}
+
+// Checks the trailer of a version 3 checkpoint against every byte before it.
+void check_trailer(std::span<const std::uint8_t> bytes) {
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  const std::string_view trailer = text.substr(text.size() - kTrailerSize);
+  const std::string_view digits = trailer.substr(kTrailerTag.size(), 8);
+  const bool well_formed =
+      trailer.starts_with(kTrailerTag) && trailer.back() == '\n' &&
+      std::all_of(digits.begin(), digits.end(), [](char c) { return std::isxdigit(c) != 0; });
+  if (!well_formed) {
+    throw CheckpointError(
+        "learner checkpoint does not end with its checksum trailer 'CRC32 <8 hex digits>' "
+        "(truncated or damaged file)");
+  }
+  const auto stored =
+      static_cast<std::uint32_t>(std::stoul(std::string(digits), nullptr, /*base=*/16));
+  const std::uint32_t actual = crc32(bytes.first(bytes.size() - kTrailerSize));
+  if (stored != actual) {
+    char numbers[64];
+    std::snprintf(numbers, sizeof numbers, "CRC-32 of its content is %08x, its trailer says %08x",
+                  actual, stored);
+    throw CheckpointError(std::string("learner checkpoint is damaged: the ") + numbers);
+  }
+}
+
+// Decompresses the replay section into `out`. The sizes come from a file that may be damaged,
+// so nothing is allocated up front: the output grows only by what the frame actually produces
+// and the decompression stops as soon as it would exceed the size the counters line declares.
+void decompress_replay(std::span<const std::uint8_t> frame, std::uint64_t declared,
+                       std::vector<std::uint8_t>& out) {
+  const auto fail = [](const std::string& what) {
+    return CheckpointError("the replay section of the learner checkpoint " + what +
+                           " (damaged file)");
+  };
+  const unsigned long long content = ZSTD_getFrameContentSize(frame.data(), frame.size());
+  if (content == ZSTD_CONTENTSIZE_ERROR) throw fail("does not start with a zstd frame header");
+  if (content != ZSTD_CONTENTSIZE_UNKNOWN && content != declared) {
+    throw fail("holds " + std::to_string(content) + " bytes, its counters line declares " +
+               std::to_string(declared));
+  }
+  std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  INDRIVE_CHECK(context != nullptr) << "zstd could not make a decompression context";
+  std::vector<std::uint8_t> block(ZSTD_DStreamOutSize());
+  ZSTD_inBuffer in{frame.data(), frame.size(), 0};
+  out.clear();
+  while (true) {
+    ZSTD_outBuffer piece{block.data(), block.size(), 0};
+    const std::size_t status = ZSTD_decompressStream(context.get(), &piece, &in);
+    if (ZSTD_isError(status)) {
+      throw fail(std::string("does not decompress (") + ZSTD_getErrorName(status) + ")");
+    }
+    if (piece.pos > declared - out.size()) {
+      throw fail("decompresses to more than the " + std::to_string(declared) +
+                 " bytes its counters line declares");
+    }
+    out.insert(out.end(), block.data(), block.data() + piece.pos);
+    if (status == 0) break;  // the frame is complete and its content checksum matched
+    if (in.pos == in.size && piece.pos < piece.size) throw fail("ends inside its zstd frame");
+  }
+  if (in.pos != in.size) {
+    throw fail("has " + std::to_string(in.size - in.pos) + " bytes after its zstd frame");
+  }
+  if (out.size() != declared) {
+    throw fail("decompresses to " + std::to_string(out.size()) +
+               " bytes, its counters line declares " + std::to_string(declared));
+  }
 }
 
 }  // namespace
@@ -67,10 +147,15 @@ std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
       {"policy_version", counters.policy_version}, {"learner_epoch", counters.learner_epoch},
       {"agent_bytes", agent_bytes.size()},         {"replay_bytes", replay_bytes.size()},
       {"replay_zstd_bytes", replay_zstd.size()}};
-  const std::string head = std::string(kCheckpointMagic) + meta.dump() + "\n";
-  std::vector<std::uint8_t> bytes(head.begin(), head.end());
+  const std::string head = std::string(kCheckpointMagicPrefix) +
+                           std::to_string(kCheckpointVersion) + "\n" + meta.dump() + "\n";
+  std::vector<std::uint8_t> bytes;
+  bytes.reserve(head.size() + agent_bytes.size() + replay_zstd.size() + kTrailerSize);
+  bytes.insert(bytes.end(), head.begin(), head.end());
   bytes.insert(bytes.end(), agent_bytes.begin(), agent_bytes.end());
   bytes.insert(bytes.end(), replay_zstd.begin(), replay_zstd.end());
+  const std::string trailer = checkpoint_trailer(crc32(bytes));
+  bytes.insert(bytes.end(), trailer.begin(), trailer.end());
   return bytes;
 }
 
@@ -78,19 +163,47 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes) {
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
-  const bool v1 = text.starts_with(kCheckpointMagicV1);
-  if (!v1 && !text.starts_with(kCheckpointMagic)) {
-    throw CheckpointError("not a learner checkpoint (its first line is not '" +
-                          std::string(kCheckpointMagic.substr(0, kCheckpointMagic.size() - 1)) +
+  const std::string expected_line =
+      std::string(kCheckpointMagicPrefix) + std::to_string(kCheckpointVersion);
+  // "INDRIVE-LEARNER-CHECKPOINT <one digit>\n"
+  const std::size_t magic_size = kCheckpointMagicPrefix.size() + 2;
+  const bool has_magic = text.size() >= magic_size && text.starts_with(kCheckpointMagicPrefix) &&
+                         std::isdigit(static_cast<unsigned char>(text[magic_size - 2])) &&
+                         text[magic_size - 1] == '\n';
+  if (!has_magic) {
+    const std::size_t compared = std::min(text.size(), kCheckpointMagicPrefix.size());
+    if (text.size() < magic_size &&
+        text.substr(0, compared) == kCheckpointMagicPrefix.substr(0, compared)) {
+      throw CheckpointError("learner checkpoint of " + std::to_string(bytes.size()) +
+                            " bytes is truncated inside its first line");
+    }
+    throw CheckpointError("not a learner checkpoint (its first line is not '" + expected_line +
                           "')");
   }
-  const std::size_t magic_size = kCheckpointMagic.size();
-  const std::size_t meta_end = text.find('\n', magic_size);
+  const int version = text[magic_size - 2] - '0';
+  if (version < 1 || version > kCheckpointVersion) {
+    throw CheckpointError("learner checkpoint has format version " + std::to_string(version) +
+                          "; this program reads versions 1 to " +
+                          std::to_string(kCheckpointVersion) + " (written by a newer learner?)");
+  }
+  std::size_t body_size = bytes.size();
+  if (version >= 3) {
+    if (bytes.size() < magic_size + kTrailerSize) {
+      throw CheckpointError("learner checkpoint of " + std::to_string(bytes.size()) +
+                            " bytes is too short to hold its checksum trailer (truncated file)");
+    }
+    // Before anything is parsed: a damaged counters line could otherwise parse as other numbers.
+    check_trailer(bytes);
+    body_size -= kTrailerSize;
+  }
+  const std::size_t meta_end = text.substr(0, body_size).find('\n', magic_size);
   if (meta_end == std::string_view::npos) {
     throw CheckpointError("learner checkpoint is truncated inside its counters line");
   }
+  const std::size_t agent_begin = meta_end + 1;
+  const std::uint64_t after_counters = body_size - agent_begin;
   LearnerCounters counters;
-  std::uint64_t agent_size = bytes.size() - (meta_end + 1);
+  std::uint64_t agent_size = after_counters;
   std::uint64_t replay_size = 0, replay_zstd_size = 0;
   try {
     const auto meta = nlohmann::json::parse(text.substr(magic_size, meta_end - magic_size));
@@ -98,7 +211,7 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
     counters.updates = meta.at("updates").get<std::int64_t>();
     counters.policy_version = meta.at("policy_version").get<std::uint64_t>();
     counters.learner_epoch = meta.at("learner_epoch").get<std::uint64_t>();
-    if (!v1) {
+    if (version >= 2) {
       agent_size = meta.at("agent_bytes").get<std::uint64_t>();
       replay_size = meta.at("replay_bytes").get<std::uint64_t>();
       replay_zstd_size = meta.at("replay_zstd_bytes").get<std::uint64_t>();
@@ -107,28 +220,24 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
     throw CheckpointError(std::string("learner checkpoint counters are unreadable: ") +
                           error.what());
   }
-  const std::size_t agent_begin = meta_end + 1;
-  if (bytes.size() - agent_begin != agent_size + replay_zstd_size) {
-    throw CheckpointError("learner checkpoint has " + std::to_string(bytes.size() - agent_begin) +
+  // Compared without adding the sizes: damaged ones near 2^64 would wrap around.
+  if (agent_size > after_counters || replay_zstd_size != after_counters - agent_size) {
+    throw CheckpointError("learner checkpoint has " + std::to_string(after_counters) +
                           " bytes after its counters, its header says " +
-                          std::to_string(agent_size + replay_zstd_size) +
-                          " (truncated or damaged file); delete it to resume from an older one");
+                          std::to_string(agent_size) + " + " + std::to_string(replay_zstd_size) +
+                          " (truncated or damaged file)");
   }
-  agent_bytes.assign(bytes.begin() + static_cast<std::ptrdiff_t>(agent_begin),
-                     bytes.begin() + static_cast<std::ptrdiff_t>(agent_begin + agent_size));
+  if (replay_zstd_size == 0 && replay_size != 0) {
+    throw CheckpointError("learner checkpoint declares " + std::to_string(replay_size) +
+                          " replay bytes but holds no replay section (damaged file)");
+  }
+  const auto agent_section = bytes.subspan(agent_begin, agent_size);
+  agent_bytes.assign(agent_section.begin(), agent_section.end());
   if (replay_bytes != nullptr) {
     replay_bytes->clear();
     if (replay_zstd_size > 0) {
-      replay_bytes->resize(replay_size);
-      const std::size_t got =
-          ZSTD_decompress(replay_bytes->data(), replay_bytes->size(),
-                          bytes.data() + agent_begin + agent_size, replay_zstd_size);
-      if (ZSTD_isError(got) || got != replay_size) {
-        throw CheckpointError(
-            std::string("the replay section of the learner checkpoint does not decompress (") +
-            (ZSTD_isError(got) ? ZSTD_getErrorName(got) : "wrong size") +
-            "); delete the file to resume from an older checkpoint");
-      }
+      decompress_replay(bytes.subspan(agent_begin + agent_size, replay_zstd_size), replay_size,
+                        *replay_bytes);
     }
   }
   return counters;

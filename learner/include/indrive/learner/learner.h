@@ -35,17 +35,20 @@ struct LearnerCounters {
   std::uint64_t learner_epoch = 0;  // starts of the learner in this run
 };
 
-// A learner checkpoint: a header line, the counters and section sizes as one JSON line, the
-// agent's own checkpoint bytes, then the replay buffer's file (ReplayBuffer::save) compressed
-// with zstd, so that a resumed learner trains on the data it had instead of refilling.
-// `replay_bytes` may be empty (no replay section).
+// A learner checkpoint (format version 3): a header line, the counters and section sizes as
+// one JSON line, the agent's own checkpoint bytes, then the replay buffer's file
+// (ReplayBuffer::save) compressed with zstd, so that a resumed learner trains on the data it had
+// instead of refilling, and a fixed-size trailer "CRC32 <8 hex digits>\n" with the CRC-32 of
+// every byte before it. `replay_bytes` may be empty (no replay section).
 std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
                                           std::span<const std::uint8_t> agent_bytes,
                                           std::span<const std::uint8_t> replay_bytes = {});
 // Splits a packed checkpoint into counters, agent bytes and (when `replay_bytes` is given) the
-// decompressed replay file, empty when the checkpoint has none. Reads the older format without
-// a replay section too. Throws CheckpointError when the bytes are not a learner checkpoint or
-// a section is truncated or corrupt.
+// decompressed replay file, empty when the checkpoint has none. Reads versions 1 (no replay
+// section) and 2 (no trailer) too. Throws CheckpointError when the bytes are not a learner
+// checkpoint or are truncated or damaged. Memory stays bounded by what the bytes hold: the
+// replay section is never given more room than its zstd frame produces, whatever the damaged
+// sizes of the counters line say.
 LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes = nullptr);
