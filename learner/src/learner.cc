@@ -43,6 +43,10 @@ constexpr int kReplayZstdLevel = 1;
 // learner killed between checkpoints never hands out a version twice after its restart.
 constexpr std::string_view kVersionReserveFile = "policy_versions_reserved";
 constexpr std::uint64_t kVersionReserveBlock = 100;
+// A damaged checkpoint that a resume skipped is renamed to <name> + this, out of the rotation:
+// its counter sorts after the checkpoints the resumed learner writes next, so left in place it
+// would stay "newest" and the retention of learner.checkpoint_keep would delete intact ones.
+constexpr std::string_view kDamagedSuffix = ".damaged";
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
@@ -252,12 +256,7 @@ struct Learner::Impl {
                                        : service.run_dir().parent_path(),
                                    service.run_id())),
         checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
-        agent(agent_config),
-        replay({.capacity = agent_config.replay.capacity,
-                .height = agent_config.world_model.image,
-                .width = agent_config.world_model.image,
-                .has_rewards = agent_config.phase != agent::Phase::kPretrain,
-                .seed = agent_config.replay.seed + agent_config.seed}),
+        replay(replay_options(agent_config)),
         rate({.replay_ratio = service.config().get<double>("learner.replay_ratio"),
               .steps_per_update =
                   static_cast<std::int64_t>(agent_config.replay.batch) * agent_config.replay.length,
@@ -323,31 +322,116 @@ struct Learner::Impl {
     participant.reset();
   }
 
-  // Restores the newest checkpoint of this run, or a finetune's initial checkpoint.
-  void resume() {
+  static agent::ReplayOptions replay_options(const agent::AgentConfig& agent_config) {
+    return {.capacity = agent_config.replay.capacity,
+            .height = agent_config.world_model.image,
+            .width = agent_config.world_model.image,
+            .has_rewards = agent_config.phase != agent::Phase::kPretrain,
+            .seed = agent_config.replay.seed + agent_config.seed};
+  }
+
+  // What one checkpoint file restores, loaded into fresh objects: a file that fails half way
+  // (the agent loads its parameters before it checks its normalisers, for one) leaves nothing
+  // of itself in the learner's own agent and replay.
+  struct Restored {
+    LearnerCounters counters;
+    std::unique_ptr<agent::Agent> agent;
+    std::optional<agent::ReplayBuffer> replay;
+  };
+
+  Restored restore(const fs::path& file) const {
     std::vector<std::uint8_t> agent_bytes, replay_bytes;
-    if (auto newest = checkpoints.newest()) {
-      stats.counters = unpack_checkpoint(read_file(*newest), agent_bytes, &replay_bytes);
-      load_agent(agent_bytes);
-      if (!replay_bytes.empty()) load_replay(replay_bytes);
-      stats.restored_replay_steps = replay.size();
-      INDRIVE_LOG(kInfo, "learner")
-          << "resumed from " << newest->string() << " with " << replay.size() << " replay steps";
+    Restored restored;
+    restored.counters = unpack_checkpoint(read_file(file), agent_bytes, &replay_bytes);
+    restored.agent = std::make_unique<agent::Agent>(agent_config);
+    restored.agent->load_checkpoint(agent_bytes, file.string() + " (agent section)");
+    restored.replay.emplace(replay_options(agent_config));
+    if (!replay_bytes.empty()) restored.replay->load(replay_bytes, file.string() + " (replay)");
+    return restored;
+  }
+
+  // Restores the newest intact checkpoint of this run, or a finetune's initial checkpoint.
+  void resume() {
+    const std::vector<fs::path> files = checkpoints.list();
+    if (!files.empty()) {
+      resume_from(files);
     } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
                !init.empty()) {
       const auto bytes = read_file(init);
+      std::vector<std::uint8_t> agent_bytes;
       try {
         unpack_checkpoint(bytes, agent_bytes);
       } catch (const CheckpointError&) {
         agent_bytes = bytes;  // a bare agent checkpoint
       }
-      load_agent(agent_bytes);
+      agent = std::make_unique<agent::Agent>(agent_config);
+      agent->load_checkpoint(agent_bytes, init);
       INDRIVE_LOG(kInfo, "learner") << "initialised from " << init;
+    } else {
+      agent = std::make_unique<agent::Agent>(agent_config);
     }
     ++stats.counters.learner_epoch;
     // Snapshots published after the newest checkpoint used versions up to the reserved mark.
     reserved_version = read_reserved_version();
     stats.counters.policy_version = std::max(stats.counters.policy_version, reserved_version);
+  }
+
+  // Tries the checkpoints (oldest first in `files`) newest first and keeps the first that
+  // restores completely. A damaged file is skipped with a warning, not fatal: a checkpoint cut
+  // short by a crash of the machine or a bit flip on disk should cost the run only the updates
+  // since the older one. With none intact the learner refuses to start rather than start the
+  // run again from nothing, which would silently throw away the run's training so far.
+  void resume_from(const std::vector<fs::path>& files) {
+    std::vector<std::pair<fs::path, std::string>> damaged;
+    for (auto file = files.rbegin(); file != files.rend(); ++file) {
+      Restored restored;
+      try {
+        restored = restore(*file);
+      } catch (const std::exception& error) {
+        // Whatever the loaders throw: CheckpointError, agent::AgentError, agent::ReplayError,
+        // IoError when the file cannot be read, std::bad_alloc for sizes no memory holds.
+        damaged.emplace_back(*file, error.what());
+        INDRIVE_LOG(kWarn, "learner") << "checkpoint " << file->string()
+                                      << " cannot be restored and is skipped: " << error.what();
+        continue;
+      }
+      stats.counters = restored.counters;
+      agent = std::move(restored.agent);
+      replay = std::move(*restored.replay);
+      stats.restored_replay_steps = replay.size();
+      stats.resumed_from = *file;
+      stats.skipped_checkpoints = damaged.size();
+      for (const auto& [path, reason] : damaged) set_aside(path);
+      INDRIVE_LOG(kInfo, "learner")
+          << "resumed from " << file->string() << " with " << replay.size()
+          << " replay steps (skipped " << damaged.size() << " damaged newer checkpoint"
+          << (damaged.size() == 1 ? "" : "s") << ")";
+      return;
+    }
+    std::string message = "no checkpoint of run '" + config.run_id() + "' can be restored (" +
+                          std::to_string(damaged.size()) + " tried):";
+    for (const auto& [path, reason] : damaged) message += "\n  " + path.string() + ": " + reason;
+    message +=
+        "\nThe learner does not start the run again from nothing on its own: restore an "
+        "intact copy, or move these files out of " +
+        run.checkpoints().string() + " to start the run afresh.";
+    throw CheckpointError(message);
+  }
+
+  // Moves a damaged checkpoint out of the rotation, keeping its bytes for a look.
+  void set_aside(const fs::path& file) {
+    const fs::path target = file.string() + std::string(kDamagedSuffix);
+    std::error_code error;
+    fs::rename(file, target, error);
+    if (error) {
+      INDRIVE_LOG(kWarn, "learner")
+          << "could not rename damaged checkpoint " << file.string() << " to "
+          << target.filename().string() << ": " << error.message() << "; move it away by hand";
+    } else {
+      INDRIVE_LOG(kWarn, "learner")
+          << "damaged checkpoint " << file.string() << " set aside as "
+          << target.filename().string() << "; delete it once it is no longer needed";
+    }
   }
 
   std::uint64_t read_reserved_version() const {
@@ -378,31 +462,11 @@ struct Learner::Impl {
     atomic_write(run.checkpoints() / kVersionReserveFile, std::to_string(reserved_version));
   }
 
-  void load_replay(const std::vector<std::uint8_t>& bytes) {
-    const fs::path staging = run.checkpoints() / "replay-staging.bin";
-    atomic_write(staging, bytes);
-    replay.load(staging);
-    fs::remove(staging);
-  }
-
-  void load_agent(const std::vector<std::uint8_t>& bytes) {
-    const fs::path staging = run.checkpoints() / "agent-staging.bin";
-    atomic_write(staging, bytes);
-    agent.load_checkpoint(staging);
-    fs::remove(staging);
-  }
-
   void save_checkpoint() {
     const auto start = Clock::now();
-    const fs::path staging = run.checkpoints() / "agent-staging.bin";
-    agent.save_checkpoint(staging);
-    const auto agent_bytes = read_file(staging);
-    fs::remove(staging);
     // Replay goes into the same file, so counters, model and data always match.
-    const fs::path replay_staging = run.checkpoints() / "replay-staging.bin";
-    replay.save(replay_staging);
-    const auto replay_bytes = read_file(replay_staging);
-    fs::remove(replay_staging);
+    const auto agent_bytes = agent->checkpoint_bytes();
+    const auto replay_bytes = replay.to_bytes();
     const auto packed = pack_checkpoint(stats.counters, agent_bytes, replay_bytes);
     const fs::path path =
         checkpoints.save(static_cast<std::uint64_t>(stats.counters.updates), packed);
@@ -479,8 +543,8 @@ struct Learner::Impl {
     agent::SequenceBatch batch =
         replay.sample(agent_config.replay.batch, agent_config.replay.length);
     try {
-      last_metrics = agent.train_step(batch);
-      const agent::TrainMetrics timing = agent.last_timing().as_metrics();
+      last_metrics = agent->train_step(batch);
+      const agent::TrainMetrics timing = agent->last_timing().as_metrics();
       last_metrics.insert(last_metrics.end(), timing.begin(), timing.end());
     } catch (const std::exception& error) {
       // A failed update is counted and skipped; the run goes on.
@@ -504,7 +568,7 @@ struct Learner::Impl {
     snapshot.phase(config.wire_phase());
     snapshot.env_steps(static_cast<std::uint64_t>(stats.counters.env_steps));
     snapshot.updates(static_cast<std::uint64_t>(stats.counters.updates));
-    snapshot.params(agent.snapshot());
+    snapshot.params(agent->snapshot());
     dds::seal(snapshot);
     policy_writer->write(snapshot);
     newest_snapshot = std::move(snapshot);
@@ -710,7 +774,7 @@ struct Learner::Impl {
   agent::AgentConfig agent_config;
   RunDir run;
   CheckpointFiles checkpoints;
-  agent::Agent agent;
+  std::unique_ptr<agent::Agent> agent;  // set by resume()
   agent::ReplayBuffer replay;
   RateLimiter rate;
   IngestOptions ingest;

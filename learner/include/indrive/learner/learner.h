@@ -65,12 +65,17 @@ struct LearnerStats {
   std::uint64_t failed_updates = 0;
   std::uint64_t checkpoints = 0;
   std::int64_t restored_replay_steps = 0;  // replay steps restored from the checkpoint
+  std::filesystem::path resumed_from;      // the checkpoint the learner resumed from, if any
+  // Damaged checkpoints, newer than resumed_from, that the resume skipped (and set aside).
+  std::uint64_t skipped_checkpoints = 0;
 };
 
 class Learner {
  public:
   // Opens the run directory (writes config.yaml), builds the agent and replay, resumes from
-  // the newest checkpoint if any, and sets up DDS. Throws CheckpointError, agent::AgentError,
+  // the newest checkpoint that restores completely (damaged newer ones are logged, skipped and
+  // renamed to <name>.damaged), and sets up DDS. Throws CheckpointError listing each file and
+  // its fault when there are checkpoints but none restores, and agent::AgentError,
   // dds::DdsError or IoError with what is wrong.
   explicit Learner(const actor::ServiceConfig& config);
   ~Learner();
