@@ -401,6 +401,7 @@ struct Learner::Impl {
       stats.restored_replay_steps = replay.size();
       stats.resumed_from = *file;
       stats.skipped_checkpoints = damaged.size();
+      latest_checkpoint = *file;
       for (const auto& [path, reason] : damaged) set_aside(path);
       INDRIVE_LOG(kInfo, "learner")
           << "resumed from " << file->string() << " with " << replay.size()
@@ -456,28 +457,58 @@ struct Learner::Impl {
 
   // After the final checkpoint no version above the current one was published: a clean
   // restart continues right after it instead of after the reserved block.
+  // Failing to write it (disk full) is harmless: the larger reservation on disk stays valid.
   void release_reserved_versions() {
     if (reserved_version <= stats.counters.policy_version) return;
-    reserved_version = stats.counters.policy_version;
-    atomic_write(run.checkpoints() / kVersionReserveFile, std::to_string(reserved_version));
+    try {
+      atomic_write(run.checkpoints() / kVersionReserveFile,
+                   std::to_string(stats.counters.policy_version));
+      reserved_version = stats.counters.policy_version;
+    } catch (const IoError& error) {
+      INDRIVE_LOG(kWarn, "learner") << "reserved policy versions not released: " << error.what()
+                                    << "; a restart skips to v" << reserved_version + 1;
+    }
   }
 
-  void save_checkpoint() {
+  // Writes a checkpoint; returns whether it was written. A write that fails (disk full, I/O
+  // error) is logged and counted but does not end the run: atomic_write leaves the previous
+  // checkpoint as it was and no partial file, and the next checkpoint time tries again.
+  // `final`: the one at exit, which has no next try.
+  bool save_checkpoint(bool final = false) {
     const auto start = Clock::now();
     // Replay goes into the same file, so counters, model and data always match.
     const auto agent_bytes = agent->checkpoint_bytes();
     const auto replay_bytes = replay.to_bytes();
     const auto packed = pack_checkpoint(stats.counters, agent_bytes, replay_bytes);
-    const fs::path path =
-        checkpoints.save(static_cast<std::uint64_t>(stats.counters.updates), packed);
-    ++stats.checkpoints;
+    const auto counter = static_cast<std::uint64_t>(stats.counters.updates);
+    fs::path path;
+    try {
+      path = checkpoints.save(counter, packed);
+    } catch (const IoError& error) {
+      last_checkpoint = Clock::now();
+      ++stats.checkpoint_failures;
+      std::ostringstream next;
+      if (!final) next << "; the next try is in " << checkpoint_s << " s (free space on that disk)";
+      INDRIVE_LOG(kError, "learner")
+          << (final ? "final " : "") << "checkpoint "
+          << checkpoints.path(counter).filename().string() << " (" << packed.size()
+          << " bytes) was not written: " << error.what() << "; "
+          << (latest_checkpoint.empty()
+                  ? "this run has no earlier checkpoint"
+                  : "the previous checkpoint " + latest_checkpoint.string() + " is intact")
+          << "; " << stats.checkpoint_failures << " failed in this run" << next.str();
+      return false;
+    }
     last_checkpoint = Clock::now();
+    latest_checkpoint = path;
+    ++stats.checkpoints;
     INDRIVE_LOG(kInfo, "learner") << "checkpoint " << path.filename().string() << " ("
                                   << packed.size() << " bytes: agent " << agent_bytes.size()
                                   << ", replay of " << replay.size() << " steps "
                                   << replay_bytes.size() << " -> "
                                   << packed.size() - agent_bytes.size() << " compressed; "
                                   << seconds_since(start) << " s)";
+    return true;
   }
 
   // DDS thread: decode and queue; the acting thread owns the replay buffer.
@@ -685,6 +716,8 @@ struct Learner::Impl {
                              {"dropped_wrong_schema", drops.count(dds::DropReason::kWrongSchema)},
                              {"sequence_gaps", stats.sequence_gaps},
                              {"failed_updates", stats.failed_updates},
+                             {"checkpoints", stats.checkpoints},
+                             {"checkpoint_failures", stats.checkpoint_failures},
                              {"episodes", episodes},
                              {"learner_epoch", stats.counters.learner_epoch},
                              {"phase", std::string(agent::to_string(agent_config.phase))}};
@@ -756,7 +789,21 @@ struct Learner::Impl {
                                     << stats.counters.updates << " updates";
       std::this_thread::sleep_for(std::chrono::seconds(2));
     }
-    if (stats.counters.env_steps > 0 || stats.counters.updates > 0) save_checkpoint();
+    // A final checkpoint that cannot be written loses the run's work since the previous one:
+    // the exit code says so (indrive launch restarts a learner that exits non-zero, which then
+    // resumes from that previous checkpoint).
+    int code = 0;
+    if ((stats.counters.env_steps > 0 || stats.counters.updates > 0) &&
+        !save_checkpoint(/*final=*/true)) {
+      code = 1;
+      INDRIVE_LOG(kError, "learner")
+          << "the final checkpoint could not be written (see the error above), so the learner "
+             "exits with code 1: a restart resumes from "
+          << (latest_checkpoint.empty() ? "nothing (this run has no checkpoint)"
+                                        : latest_checkpoint.string())
+          << " and what was trained and received after it is lost; free disk space before the "
+             "run continues";
+    }
     release_reserved_versions();
     last_log = Clock::now() - std::chrono::hours(1);
     log_metrics();
@@ -766,8 +813,10 @@ struct Learner::Impl {
                                   << stats.counters.env_steps << " env steps, "
                                   << stats.counters.updates << " updates, policy v"
                                   << stats.counters.policy_version << ", chunks " << stats.chunks
-                                  << ", " << drops.summary();
-    return 0;
+                                  << ", " << drops.summary() << ", checkpoints "
+                                  << stats.checkpoints << " (" << stats.checkpoint_failures
+                                  << " failed)";
+    return code;
   }
 
   const actor::ServiceConfig& config;
@@ -788,6 +837,7 @@ struct Learner::Impl {
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;
   std::uint64_t reserved_version = 0;
+  fs::path latest_checkpoint;  // the newest intact checkpoint this learner wrote or resumed from
   bool done = false;
 
   std::unique_ptr<dds::Participant> participant;

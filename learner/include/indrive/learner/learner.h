@@ -64,6 +64,9 @@ struct LearnerStats {
   std::uint64_t episodes = 0;
   std::uint64_t failed_updates = 0;
   std::uint64_t checkpoints = 0;
+  // Checkpoints that could not be written (disk full, I/O error); the run went on and the
+  // previous checkpoint stayed as it was.
+  std::uint64_t checkpoint_failures = 0;
   std::int64_t restored_replay_steps = 0;  // replay steps restored from the checkpoint
   std::filesystem::path resumed_from;      // the checkpoint the learner resumed from, if any
   // Damaged checkpoints, newer than resumed_from, that the resume skipped (and set aside).
@@ -84,8 +87,10 @@ class Learner {
 
   // Receives a console progress line every log interval (the executable prints it).
   void on_progress(std::function<void(const std::string&)> callback);
-  // Trains until the env-step budget is reached (returns 0) or `stop` is set (checkpoints,
-  // then returns 0).
+  // Trains until the env-step budget is reached or `stop` is set, then checkpoints and returns
+  // 0, or 1 when that final checkpoint could not be written (the log names the file and why).
+  // A periodic checkpoint that cannot be written is logged and counted (checkpoint_failures)
+  // and tried again at the next checkpoint time; training goes on.
   int run(const std::atomic<bool>& stop);
   const LearnerStats& stats() const;
 
