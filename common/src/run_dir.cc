@@ -17,10 +17,19 @@ namespace {
 
 std::string errno_text() { return std::strerror(errno); }
 
-void fsync_directory(const fs::path& directory) {
+// Makes a rename in `directory` durable: without it a power loss can bring back the old name
+// (or none) although the file's data were synced.
+void fsync_directory(const fs::path& directory, const fs::path& path) {
   const int fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd < 0) return;  // best effort: some file systems do not allow it
-  ::fsync(fd);
+  if (fd < 0) return;  // a folder we may write but not open for reading: nothing to sync with
+  if (::fsync(fd) != 0 && errno != EINVAL && errno != ENOTSUP) {
+    // EINVAL / ENOTSUP: the file system has no directory sync (and needs none).
+    std::string message = "wrote " + path.string();
+    message += " but cannot sync its folder: " + errno_text();
+    message += " (the file may not survive a power loss; check the disk)";
+    ::close(fd);
+    throw IoError(message);
+  }
   ::close(fd);
 }
 
@@ -47,17 +56,22 @@ void atomic_write(const fs::path& path, std::span<const std::uint8_t> bytes) {
     }
     done += static_cast<std::size_t>(n);
   }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
-    const std::string reason = errno_text();
+  // Both run, so the descriptor is closed even when fsync fails (ENOSPC or EIO can surface
+  // only here, on file systems that allocate at writeback).
+  const int synced = ::fsync(fd);
+  const int sync_errno = errno;
+  const int closed = ::close(fd);
+  if (synced != 0 || closed != 0) {
+    const std::string reason = synced != 0 ? std::strerror(sync_errno) : errno_text();
     ::unlink(temporary.c_str());
-    throw IoError("cannot flush " + path.string() + ": " + reason);
+    throw IoError("cannot flush " + path.string() + ": " + reason + " (disk full?)");
   }
   if (::rename(temporary.c_str(), path.c_str()) != 0) {
     const std::string reason = errno_text();
     ::unlink(temporary.c_str());
     throw IoError("cannot rename " + temporary.string() + " to " + path.string() + ": " + reason);
   }
-  fsync_directory(directory);
+  fsync_directory(directory, path);
 }
 
 void atomic_write(const fs::path& path, const std::string& text) {
@@ -127,10 +141,14 @@ std::optional<fs::path> CheckpointFiles::newest() const {
   return files.back();
 }
 
-fs::path CheckpointFiles::save(std::uint64_t counter, std::span<const std::uint8_t> bytes) {
+fs::path CheckpointFiles::path(std::uint64_t counter) const {
   char name[32];
   std::snprintf(name, sizeof name, "ckpt-%012llu.bin", static_cast<unsigned long long>(counter));
-  const fs::path path = folder_ / name;
+  return folder_ / name;
+}
+
+fs::path CheckpointFiles::save(std::uint64_t counter, std::span<const std::uint8_t> bytes) {
+  const fs::path path = this->path(counter);
   atomic_write(path, bytes);
   auto files = list();
   for (std::size_t i = 0; i + static_cast<std::size_t>(keep_) < files.size(); ++i) {

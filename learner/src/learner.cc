@@ -2,6 +2,8 @@
 
 #include <zstd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -15,6 +17,7 @@
 
 #include "indrive/common/agent/agent.h"
 #include "indrive/common/check.h"
+#include "indrive/common/checksum.h"
 #include "indrive/common/dds.h"
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
@@ -27,15 +30,23 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 // Version 1 holds counters and agent bytes; version 2 adds the sizes of its sections and the
-// zstd-compressed replay file.
-constexpr std::string_view kCheckpointMagicV1 = "INDRIVE-LEARNER-CHECKPOINT 1\n";
-constexpr std::string_view kCheckpointMagic = "INDRIVE-LEARNER-CHECKPOINT 2\n";
+// zstd-compressed replay file; version 3 adds a trailer with a CRC-32 of every byte before it,
+// so that damage to the counters line (which has no checksum of its own) is noticed too.
+constexpr std::string_view kCheckpointMagicPrefix = "INDRIVE-LEARNER-CHECKPOINT ";
+constexpr int kCheckpointVersion = 3;
+// "CRC32 " + 8 lowercase hex digits + "\n": fixed-size, so it is found from the end of the file.
+constexpr std::string_view kTrailerTag = "CRC32 ";
+constexpr std::size_t kTrailerSize = kTrailerTag.size() + 8 + 1;
 // Replay holds class-id frames: a fast level already shrinks them many times over.
 constexpr int kReplayZstdLevel = 1;
 // Versions are reserved in blocks written to this file before any of them is published, so a
 // learner killed between checkpoints never hands out a version twice after its restart.
 constexpr std::string_view kVersionReserveFile = "policy_versions_reserved";
 constexpr std::uint64_t kVersionReserveBlock = 100;
+// A damaged checkpoint that a resume skipped is renamed to <name> + this, out of the rotation:
+// its counter sorts after the checkpoints the resumed learner writes next, so left in place it
+// would stay "newest" and the retention of learner.checkpoint_keep would delete intact ones.
+constexpr std::string_view kDamagedSuffix = ".damaged";
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
@@ -43,6 +54,79 @@ double seconds_since(Clock::time_point start) {
 
 double unix_time_s() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+std::string checkpoint_trailer(std::uint32_t crc) {
+  char text[16];
+  std::snprintf(text, sizeof text, "%08x", crc);
+  return std::string(kTrailerTag) + text + "\n";
+}
+
+// Checks the trailer of a version 3 checkpoint against every byte before it.
+void check_trailer(std::span<const std::uint8_t> bytes) {
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  const std::string_view trailer = text.substr(text.size() - kTrailerSize);
+  const std::string_view digits = trailer.substr(kTrailerTag.size(), 8);
+  const bool well_formed =
+      trailer.starts_with(kTrailerTag) && trailer.back() == '\n' &&
+      std::all_of(digits.begin(), digits.end(), [](char c) { return std::isxdigit(c) != 0; });
+  if (!well_formed) {
+    throw CheckpointError(
+        "learner checkpoint does not end with its checksum trailer 'CRC32 <8 hex digits>' "
+        "(truncated or damaged file)");
+  }
+  const auto stored =
+      static_cast<std::uint32_t>(std::stoul(std::string(digits), nullptr, /*base=*/16));
+  const std::uint32_t actual = crc32(bytes.first(bytes.size() - kTrailerSize));
+  if (stored != actual) {
+    char numbers[64];
+    std::snprintf(numbers, sizeof numbers, "CRC-32 of its content is %08x, its trailer says %08x",
+                  actual, stored);
+    throw CheckpointError(std::string("learner checkpoint is damaged: the ") + numbers);
+  }
+}
+
+// Decompresses the replay section into `out`. The sizes come from a file that may be damaged,
+// so nothing is allocated up front: the output grows only by what the frame actually produces
+// and the decompression stops as soon as it would exceed the size the counters line declares.
+void decompress_replay(std::span<const std::uint8_t> frame, std::uint64_t declared,
+                       std::vector<std::uint8_t>& out) {
+  const auto fail = [](const std::string& what) {
+    return CheckpointError("the replay section of the learner checkpoint " + what +
+                           " (damaged file)");
+  };
+  const unsigned long long content = ZSTD_getFrameContentSize(frame.data(), frame.size());
+  if (content == ZSTD_CONTENTSIZE_ERROR) throw fail("does not start with a zstd frame header");
+  if (content != ZSTD_CONTENTSIZE_UNKNOWN && content != declared) {
+    throw fail("holds " + std::to_string(content) + " bytes, its counters line declares " +
+               std::to_string(declared));
+  }
+  std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  INDRIVE_CHECK(context != nullptr) << "zstd could not make a decompression context";
+  std::vector<std::uint8_t> block(ZSTD_DStreamOutSize());
+  ZSTD_inBuffer in{frame.data(), frame.size(), 0};
+  out.clear();
+  while (true) {
+    ZSTD_outBuffer piece{block.data(), block.size(), 0};
+    const std::size_t status = ZSTD_decompressStream(context.get(), &piece, &in);
+    if (ZSTD_isError(status)) {
+      throw fail(std::string("does not decompress (") + ZSTD_getErrorName(status) + ")");
+    }
+    if (piece.pos > declared - out.size()) {
+      throw fail("decompresses to more than the " + std::to_string(declared) +
+                 " bytes its counters line declares");
+    }
+    out.insert(out.end(), block.data(), block.data() + piece.pos);
+    if (status == 0) break;  // the frame is complete and its content checksum matched
+    if (in.pos == in.size && piece.pos < piece.size) throw fail("ends inside its zstd frame");
+  }
+  if (in.pos != in.size) {
+    throw fail("has " + std::to_string(in.size - in.pos) + " bytes after its zstd frame");
+  }
+  if (out.size() != declared) {
+    throw fail("decompresses to " + std::to_string(out.size()) +
+               " bytes, its counters line declares " + std::to_string(declared));
+  }
 }
 
 }  // namespace
@@ -67,10 +151,15 @@ std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
       {"policy_version", counters.policy_version}, {"learner_epoch", counters.learner_epoch},
       {"agent_bytes", agent_bytes.size()},         {"replay_bytes", replay_bytes.size()},
       {"replay_zstd_bytes", replay_zstd.size()}};
-  const std::string head = std::string(kCheckpointMagic) + meta.dump() + "\n";
-  std::vector<std::uint8_t> bytes(head.begin(), head.end());
+  const std::string head = std::string(kCheckpointMagicPrefix) +
+                           std::to_string(kCheckpointVersion) + "\n" + meta.dump() + "\n";
+  std::vector<std::uint8_t> bytes;
+  bytes.reserve(head.size() + agent_bytes.size() + replay_zstd.size() + kTrailerSize);
+  bytes.insert(bytes.end(), head.begin(), head.end());
   bytes.insert(bytes.end(), agent_bytes.begin(), agent_bytes.end());
   bytes.insert(bytes.end(), replay_zstd.begin(), replay_zstd.end());
+  const std::string trailer = checkpoint_trailer(crc32(bytes));
+  bytes.insert(bytes.end(), trailer.begin(), trailer.end());
   return bytes;
 }
 
@@ -78,19 +167,47 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes) {
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
-  const bool v1 = text.starts_with(kCheckpointMagicV1);
-  if (!v1 && !text.starts_with(kCheckpointMagic)) {
-    throw CheckpointError("not a learner checkpoint (its first line is not '" +
-                          std::string(kCheckpointMagic.substr(0, kCheckpointMagic.size() - 1)) +
+  const std::string expected_line =
+      std::string(kCheckpointMagicPrefix) + std::to_string(kCheckpointVersion);
+  // "INDRIVE-LEARNER-CHECKPOINT <one digit>\n"
+  const std::size_t magic_size = kCheckpointMagicPrefix.size() + 2;
+  const bool has_magic = text.size() >= magic_size && text.starts_with(kCheckpointMagicPrefix) &&
+                         std::isdigit(static_cast<unsigned char>(text[magic_size - 2])) &&
+                         text[magic_size - 1] == '\n';
+  if (!has_magic) {
+    const std::size_t compared = std::min(text.size(), kCheckpointMagicPrefix.size());
+    if (text.size() < magic_size &&
+        text.substr(0, compared) == kCheckpointMagicPrefix.substr(0, compared)) {
+      throw CheckpointError("learner checkpoint of " + std::to_string(bytes.size()) +
+                            " bytes is truncated inside its first line");
+    }
+    throw CheckpointError("not a learner checkpoint (its first line is not '" + expected_line +
                           "')");
   }
-  const std::size_t magic_size = kCheckpointMagic.size();
-  const std::size_t meta_end = text.find('\n', magic_size);
+  const int version = text[magic_size - 2] - '0';
+  if (version < 1 || version > kCheckpointVersion) {
+    throw CheckpointError("learner checkpoint has format version " + std::to_string(version) +
+                          "; this program reads versions 1 to " +
+                          std::to_string(kCheckpointVersion) + " (written by a newer learner?)");
+  }
+  std::size_t body_size = bytes.size();
+  if (version >= 3) {
+    if (bytes.size() < magic_size + kTrailerSize) {
+      throw CheckpointError("learner checkpoint of " + std::to_string(bytes.size()) +
+                            " bytes is too short to hold its checksum trailer (truncated file)");
+    }
+    // Before anything is parsed: a damaged counters line could otherwise parse as other numbers.
+    check_trailer(bytes);
+    body_size -= kTrailerSize;
+  }
+  const std::size_t meta_end = text.substr(0, body_size).find('\n', magic_size);
   if (meta_end == std::string_view::npos) {
     throw CheckpointError("learner checkpoint is truncated inside its counters line");
   }
+  const std::size_t agent_begin = meta_end + 1;
+  const std::uint64_t after_counters = body_size - agent_begin;
   LearnerCounters counters;
-  std::uint64_t agent_size = bytes.size() - (meta_end + 1);
+  std::uint64_t agent_size = after_counters;
   std::uint64_t replay_size = 0, replay_zstd_size = 0;
   try {
     const auto meta = nlohmann::json::parse(text.substr(magic_size, meta_end - magic_size));
@@ -98,7 +215,7 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
     counters.updates = meta.at("updates").get<std::int64_t>();
     counters.policy_version = meta.at("policy_version").get<std::uint64_t>();
     counters.learner_epoch = meta.at("learner_epoch").get<std::uint64_t>();
-    if (!v1) {
+    if (version >= 2) {
       agent_size = meta.at("agent_bytes").get<std::uint64_t>();
       replay_size = meta.at("replay_bytes").get<std::uint64_t>();
       replay_zstd_size = meta.at("replay_zstd_bytes").get<std::uint64_t>();
@@ -107,28 +224,24 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
     throw CheckpointError(std::string("learner checkpoint counters are unreadable: ") +
                           error.what());
   }
-  const std::size_t agent_begin = meta_end + 1;
-  if (bytes.size() - agent_begin != agent_size + replay_zstd_size) {
-    throw CheckpointError("learner checkpoint has " + std::to_string(bytes.size() - agent_begin) +
+  // Compared without adding the sizes: damaged ones near 2^64 would wrap around.
+  if (agent_size > after_counters || replay_zstd_size != after_counters - agent_size) {
+    throw CheckpointError("learner checkpoint has " + std::to_string(after_counters) +
                           " bytes after its counters, its header says " +
-                          std::to_string(agent_size + replay_zstd_size) +
-                          " (truncated or damaged file); delete it to resume from an older one");
+                          std::to_string(agent_size) + " + " + std::to_string(replay_zstd_size) +
+                          " (truncated or damaged file)");
   }
-  agent_bytes.assign(bytes.begin() + static_cast<std::ptrdiff_t>(agent_begin),
-                     bytes.begin() + static_cast<std::ptrdiff_t>(agent_begin + agent_size));
+  if (replay_zstd_size == 0 && replay_size != 0) {
+    throw CheckpointError("learner checkpoint declares " + std::to_string(replay_size) +
+                          " replay bytes but holds no replay section (damaged file)");
+  }
+  const auto agent_section = bytes.subspan(agent_begin, agent_size);
+  agent_bytes.assign(agent_section.begin(), agent_section.end());
   if (replay_bytes != nullptr) {
     replay_bytes->clear();
     if (replay_zstd_size > 0) {
-      replay_bytes->resize(replay_size);
-      const std::size_t got =
-          ZSTD_decompress(replay_bytes->data(), replay_bytes->size(),
-                          bytes.data() + agent_begin + agent_size, replay_zstd_size);
-      if (ZSTD_isError(got) || got != replay_size) {
-        throw CheckpointError(
-            std::string("the replay section of the learner checkpoint does not decompress (") +
-            (ZSTD_isError(got) ? ZSTD_getErrorName(got) : "wrong size") +
-            "); delete the file to resume from an older checkpoint");
-      }
+      decompress_replay(bytes.subspan(agent_begin + agent_size, replay_zstd_size), replay_size,
+                        *replay_bytes);
     }
   }
   return counters;
@@ -143,12 +256,7 @@ struct Learner::Impl {
                                        : service.run_dir().parent_path(),
                                    service.run_id())),
         checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
-        agent(agent_config),
-        replay({.capacity = agent_config.replay.capacity,
-                .height = agent_config.world_model.image,
-                .width = agent_config.world_model.image,
-                .has_rewards = agent_config.phase != agent::Phase::kPretrain,
-                .seed = agent_config.replay.seed + agent_config.seed}),
+        replay(replay_options(agent_config)),
         rate({.replay_ratio = service.config().get<double>("learner.replay_ratio"),
               .steps_per_update =
                   static_cast<std::int64_t>(agent_config.replay.batch) * agent_config.replay.length,
@@ -214,31 +322,117 @@ struct Learner::Impl {
     participant.reset();
   }
 
-  // Restores the newest checkpoint of this run, or a finetune's initial checkpoint.
-  void resume() {
+  static agent::ReplayOptions replay_options(const agent::AgentConfig& agent_config) {
+    return {.capacity = agent_config.replay.capacity,
+            .height = agent_config.world_model.image,
+            .width = agent_config.world_model.image,
+            .has_rewards = agent_config.phase != agent::Phase::kPretrain,
+            .seed = agent_config.replay.seed + agent_config.seed};
+  }
+
+  // What one checkpoint file restores, loaded into fresh objects: a file that fails half way
+  // (the agent loads its parameters before it checks its normalisers, for one) leaves nothing
+  // of itself in the learner's own agent and replay.
+  struct Restored {
+    LearnerCounters counters;
+    std::unique_ptr<agent::Agent> agent;
+    std::optional<agent::ReplayBuffer> replay;
+  };
+
+  Restored restore(const fs::path& file) const {
     std::vector<std::uint8_t> agent_bytes, replay_bytes;
-    if (auto newest = checkpoints.newest()) {
-      stats.counters = unpack_checkpoint(read_file(*newest), agent_bytes, &replay_bytes);
-      load_agent(agent_bytes);
-      if (!replay_bytes.empty()) load_replay(replay_bytes);
-      stats.restored_replay_steps = replay.size();
-      INDRIVE_LOG(kInfo, "learner")
-          << "resumed from " << newest->string() << " with " << replay.size() << " replay steps";
+    Restored restored;
+    restored.counters = unpack_checkpoint(read_file(file), agent_bytes, &replay_bytes);
+    restored.agent = std::make_unique<agent::Agent>(agent_config);
+    restored.agent->load_checkpoint(agent_bytes, file.string() + " (agent section)");
+    restored.replay.emplace(replay_options(agent_config));
+    if (!replay_bytes.empty()) restored.replay->load(replay_bytes, file.string() + " (replay)");
+    return restored;
+  }
+
+  // Restores the newest intact checkpoint of this run, or a finetune's initial checkpoint.
+  void resume() {
+    const std::vector<fs::path> files = checkpoints.list();
+    if (!files.empty()) {
+      resume_from(files);
     } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
                !init.empty()) {
       const auto bytes = read_file(init);
+      std::vector<std::uint8_t> agent_bytes;
       try {
         unpack_checkpoint(bytes, agent_bytes);
       } catch (const CheckpointError&) {
         agent_bytes = bytes;  // a bare agent checkpoint
       }
-      load_agent(agent_bytes);
+      agent = std::make_unique<agent::Agent>(agent_config);
+      agent->load_checkpoint(agent_bytes, init);
       INDRIVE_LOG(kInfo, "learner") << "initialised from " << init;
+    } else {
+      agent = std::make_unique<agent::Agent>(agent_config);
     }
     ++stats.counters.learner_epoch;
     // Snapshots published after the newest checkpoint used versions up to the reserved mark.
     reserved_version = read_reserved_version();
     stats.counters.policy_version = std::max(stats.counters.policy_version, reserved_version);
+  }
+
+  // Tries the checkpoints (oldest first in `files`) newest first and keeps the first that
+  // restores completely. A damaged file is skipped with a warning, not fatal: a checkpoint cut
+  // short by a crash of the machine or a bit flip on disk should cost the run only the updates
+  // since the older one. With none intact the learner refuses to start rather than start the
+  // run again from nothing, which would silently throw away the run's training so far.
+  void resume_from(const std::vector<fs::path>& files) {
+    std::vector<std::pair<fs::path, std::string>> damaged;
+    for (auto file = files.rbegin(); file != files.rend(); ++file) {
+      Restored restored;
+      try {
+        restored = restore(*file);
+      } catch (const std::exception& error) {
+        // Whatever the loaders throw: CheckpointError, agent::AgentError, agent::ReplayError,
+        // IoError when the file cannot be read, std::bad_alloc for sizes no memory holds.
+        damaged.emplace_back(*file, error.what());
+        INDRIVE_LOG(kWarn, "learner") << "checkpoint " << file->string()
+                                      << " cannot be restored and is skipped: " << error.what();
+        continue;
+      }
+      stats.counters = restored.counters;
+      agent = std::move(restored.agent);
+      replay = std::move(*restored.replay);
+      stats.restored_replay_steps = replay.size();
+      stats.resumed_from = *file;
+      stats.skipped_checkpoints = damaged.size();
+      latest_checkpoint = *file;
+      for (const auto& [path, reason] : damaged) set_aside(path);
+      INDRIVE_LOG(kInfo, "learner")
+          << "resumed from " << file->string() << " with " << replay.size()
+          << " replay steps (skipped " << damaged.size() << " damaged newer checkpoint"
+          << (damaged.size() == 1 ? "" : "s") << ")";
+      return;
+    }
+    std::string message = "no checkpoint of run '" + config.run_id() + "' can be restored (" +
+                          std::to_string(damaged.size()) + " tried):";
+    for (const auto& [path, reason] : damaged) message += "\n  " + path.string() + ": " + reason;
+    message +=
+        "\nThe learner does not start the run again from nothing on its own: restore an "
+        "intact copy, or move these files out of " +
+        run.checkpoints().string() + " to start the run afresh.";
+    throw CheckpointError(message);
+  }
+
+  // Moves a damaged checkpoint out of the rotation, keeping its bytes for a look.
+  void set_aside(const fs::path& file) {
+    const fs::path target = file.string() + std::string(kDamagedSuffix);
+    std::error_code error;
+    fs::rename(file, target, error);
+    if (error) {
+      INDRIVE_LOG(kWarn, "learner")
+          << "could not rename damaged checkpoint " << file.string() << " to "
+          << target.filename().string() << ": " << error.message() << "; move it away by hand";
+    } else {
+      INDRIVE_LOG(kWarn, "learner")
+          << "damaged checkpoint " << file.string() << " set aside as "
+          << target.filename().string() << "; delete it once it is no longer needed";
+    }
   }
 
   std::uint64_t read_reserved_version() const {
@@ -263,48 +457,58 @@ struct Learner::Impl {
 
   // After the final checkpoint no version above the current one was published: a clean
   // restart continues right after it instead of after the reserved block.
+  // Failing to write it (disk full) is harmless: the larger reservation on disk stays valid.
   void release_reserved_versions() {
     if (reserved_version <= stats.counters.policy_version) return;
-    reserved_version = stats.counters.policy_version;
-    atomic_write(run.checkpoints() / kVersionReserveFile, std::to_string(reserved_version));
+    try {
+      atomic_write(run.checkpoints() / kVersionReserveFile,
+                   std::to_string(stats.counters.policy_version));
+      reserved_version = stats.counters.policy_version;
+    } catch (const IoError& error) {
+      INDRIVE_LOG(kWarn, "learner") << "reserved policy versions not released: " << error.what()
+                                    << "; a restart skips to v" << reserved_version + 1;
+    }
   }
 
-  void load_replay(const std::vector<std::uint8_t>& bytes) {
-    const fs::path staging = run.checkpoints() / "replay-staging.bin";
-    atomic_write(staging, bytes);
-    replay.load(staging);
-    fs::remove(staging);
-  }
-
-  void load_agent(const std::vector<std::uint8_t>& bytes) {
-    const fs::path staging = run.checkpoints() / "agent-staging.bin";
-    atomic_write(staging, bytes);
-    agent.load_checkpoint(staging);
-    fs::remove(staging);
-  }
-
-  void save_checkpoint() {
+  // Writes a checkpoint; returns whether it was written. A write that fails (disk full, I/O
+  // error) is logged and counted but does not end the run: atomic_write leaves the previous
+  // checkpoint as it was and no partial file, and the next checkpoint time tries again.
+  // `final`: the one at exit, which has no next try.
+  bool save_checkpoint(bool final = false) {
     const auto start = Clock::now();
-    const fs::path staging = run.checkpoints() / "agent-staging.bin";
-    agent.save_checkpoint(staging);
-    const auto agent_bytes = read_file(staging);
-    fs::remove(staging);
     // Replay goes into the same file, so counters, model and data always match.
-    const fs::path replay_staging = run.checkpoints() / "replay-staging.bin";
-    replay.save(replay_staging);
-    const auto replay_bytes = read_file(replay_staging);
-    fs::remove(replay_staging);
+    const auto agent_bytes = agent->checkpoint_bytes();
+    const auto replay_bytes = replay.to_bytes();
     const auto packed = pack_checkpoint(stats.counters, agent_bytes, replay_bytes);
-    const fs::path path =
-        checkpoints.save(static_cast<std::uint64_t>(stats.counters.updates), packed);
-    ++stats.checkpoints;
+    const auto counter = static_cast<std::uint64_t>(stats.counters.updates);
+    fs::path path;
+    try {
+      path = checkpoints.save(counter, packed);
+    } catch (const IoError& error) {
+      last_checkpoint = Clock::now();
+      ++stats.checkpoint_failures;
+      std::ostringstream next;
+      if (!final) next << "; the next try is in " << checkpoint_s << " s (free space on that disk)";
+      INDRIVE_LOG(kError, "learner")
+          << (final ? "final " : "") << "checkpoint "
+          << checkpoints.path(counter).filename().string() << " (" << packed.size()
+          << " bytes) was not written: " << error.what() << "; "
+          << (latest_checkpoint.empty()
+                  ? "this run has no earlier checkpoint"
+                  : "the previous checkpoint " + latest_checkpoint.string() + " is intact")
+          << "; " << stats.checkpoint_failures << " failed in this run" << next.str();
+      return false;
+    }
     last_checkpoint = Clock::now();
+    latest_checkpoint = path;
+    ++stats.checkpoints;
     INDRIVE_LOG(kInfo, "learner") << "checkpoint " << path.filename().string() << " ("
                                   << packed.size() << " bytes: agent " << agent_bytes.size()
                                   << ", replay of " << replay.size() << " steps "
                                   << replay_bytes.size() << " -> "
                                   << packed.size() - agent_bytes.size() << " compressed; "
                                   << seconds_since(start) << " s)";
+    return true;
   }
 
   // DDS thread: decode and queue; the acting thread owns the replay buffer.
@@ -373,8 +577,8 @@ struct Learner::Impl {
     agent::SequenceBatch batch =
         replay.sample(agent_config.replay.batch, agent_config.replay.length);
     try {
-      last_metrics = agent.train_step(batch);
-      const agent::TrainMetrics timing = agent.last_timing().as_metrics();
+      last_metrics = agent->train_step(batch);
+      const agent::TrainMetrics timing = agent->last_timing().as_metrics();
       last_metrics.insert(last_metrics.end(), timing.begin(), timing.end());
     } catch (const std::exception& error) {
       // A failed update is counted and skipped; the run goes on.
@@ -398,7 +602,7 @@ struct Learner::Impl {
     snapshot.phase(config.wire_phase());
     snapshot.env_steps(static_cast<std::uint64_t>(stats.counters.env_steps));
     snapshot.updates(static_cast<std::uint64_t>(stats.counters.updates));
-    snapshot.params(agent.snapshot());
+    snapshot.params(agent->snapshot());
     dds::seal(snapshot);
     policy_writer->write(snapshot);
     newest_snapshot = std::move(snapshot);
@@ -518,8 +722,9 @@ struct Learner::Impl {
                              {"dropped_undecodable", dds::undecodable_samples()},
                              {"sequence_gaps", stats.sequence_gaps},
                              {"failed_updates", stats.failed_updates},
+                             {"checkpoints", stats.checkpoints},
+                             {"checkpoint_failures", stats.checkpoint_failures},
                              {"episodes", episodes},
-                             {"learner_epoch", stats.counters.learner_epoch},
                              {"phase", std::string(agent::to_string(agent_config.phase))}};
     if (episodes > 0) record["episode_success_rate"] = static_cast<double>(successes) / episodes;
     record.update(episode_record);
@@ -589,7 +794,21 @@ struct Learner::Impl {
                                     << stats.counters.updates << " updates";
       std::this_thread::sleep_for(std::chrono::seconds(2));
     }
-    if (stats.counters.env_steps > 0 || stats.counters.updates > 0) save_checkpoint();
+    // A final checkpoint that cannot be written loses the run's work since the previous one:
+    // the exit code says so (indrive launch restarts a learner that exits non-zero, which then
+    // resumes from that previous checkpoint).
+    int code = 0;
+    if ((stats.counters.env_steps > 0 || stats.counters.updates > 0) &&
+        !save_checkpoint(/*final=*/true)) {
+      code = 1;
+      INDRIVE_LOG(kError, "learner")
+          << "the final checkpoint could not be written (see the error above), so the learner "
+             "exits with code 1: a restart resumes from "
+          << (latest_checkpoint.empty() ? "nothing (this run has no checkpoint)"
+                                        : latest_checkpoint.string())
+          << " and what was trained and received after it is lost; free disk space before the "
+             "run continues";
+    }
     release_reserved_versions();
     last_log = Clock::now() - std::chrono::hours(1);
     log_metrics();
@@ -599,15 +818,17 @@ struct Learner::Impl {
                                   << stats.counters.env_steps << " env steps, "
                                   << stats.counters.updates << " updates, policy v"
                                   << stats.counters.policy_version << ", chunks " << stats.chunks
-                                  << ", " << drops.summary();
-    return 0;
+                                  << ", " << drops.summary() << ", checkpoints "
+                                  << stats.checkpoints << " (" << stats.checkpoint_failures
+                                  << " failed)";
+    return code;
   }
 
   const actor::ServiceConfig& config;
   agent::AgentConfig agent_config;
   RunDir run;
   CheckpointFiles checkpoints;
-  agent::Agent agent;
+  std::unique_ptr<agent::Agent> agent;  // set by resume()
   agent::ReplayBuffer replay;
   RateLimiter rate;
   IngestOptions ingest;
@@ -621,6 +842,7 @@ struct Learner::Impl {
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;
   std::uint64_t reserved_version = 0;
+  fs::path latest_checkpoint;  // the newest intact checkpoint this learner wrote or resumed from
   bool done = false;
 
   std::unique_ptr<dds::Participant> participant;

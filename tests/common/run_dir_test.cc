@@ -62,6 +62,13 @@ TEST(CheckpointFiles, KeepsTheNewestNAndIgnoresInterruptedWrites) {
   EXPECT_EQ(checkpoints.newest()->filename(), "ckpt-000000004000.bin");
 }
 
+TEST(CheckpointFiles, PathNamesTheFileThatSaveWrites) {
+  testing::TempDir dir;
+  CheckpointFiles checkpoints(dir.path(), 2);
+  EXPECT_EQ(checkpoints.path(42), dir.path() / "ckpt-000000000042.bin");
+  EXPECT_EQ(checkpoints.save(42, std::vector<std::uint8_t>{1}), checkpoints.path(42));
+}
+
 TEST(PassedMultiple, OnlyWhenACounterCrossesAMultiple) {
   EXPECT_TRUE(passed_multiple(990, 1008, 1000));
   EXPECT_TRUE(passed_multiple(999, 1000, 1000));

@@ -50,7 +50,8 @@ class SectionReader {
       throw AgentError("checkpoint " + file_ + " is truncated");
     std::memcpy(&size, data_.data() + pos_, sizeof(size));
     pos_ += sizeof(size);
-    if (pos_ + size > data_.size()) throw AgentError("checkpoint " + file_ + " is truncated");
+    // Compared as a remainder: a damaged size near 2^64 would wrap pos_ + size.
+    if (size > data_.size() - pos_) throw AgentError("checkpoint " + file_ + " is truncated");
     auto out = data_.subspan(pos_, size);
     pos_ += size;
     return out;
@@ -280,7 +281,7 @@ std::vector<nn::Adam*> Agent::optimizers() const {
           &task_->critic_optimizer()};
 }
 
-void Agent::save_checkpoint(const std::filesystem::path& path) const {
+std::vector<std::uint8_t> Agent::checkpoint_bytes() const {
   std::vector<std::uint8_t> out(kMagic, kMagic + 4);
   out.resize(8);
   std::memcpy(out.data() + 4, &kVersion, 4);
@@ -304,7 +305,11 @@ void Agent::save_checkpoint(const std::filesystem::path& path) const {
   const std::uint32_t crc = indrive::crc32(out.data(), out.size());
   const auto* c = reinterpret_cast<const std::uint8_t*>(&crc);
   out.insert(out.end(), c, c + 4);
+  return out;
+}
 
+void Agent::save_checkpoint(const std::filesystem::path& path) const {
+  const std::vector<std::uint8_t> out = checkpoint_bytes();
   const std::filesystem::path temp = path.string() + ".tmp";
   {
     std::ofstream file(temp, std::ios::binary | std::ios::trunc);
@@ -321,8 +326,12 @@ void Agent::load_checkpoint(const std::filesystem::path& path) {
   const std::string name = path.string();
   std::ifstream file(path, std::ios::binary);
   if (!file) throw AgentError("cannot open checkpoint " + name + ": check the path");
-  std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(file)),
-                                 std::istreambuf_iterator<char>());
+  const std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(file)),
+                                       std::istreambuf_iterator<char>());
+  load_checkpoint(data, name);
+}
+
+void Agent::load_checkpoint(std::span<const std::uint8_t> data, const std::string& name) {
   if (data.size() < 12 || std::memcmp(data.data(), kMagic, 4) != 0) {
     throw AgentError("file " + name + " is not an agent checkpoint");
   }

@@ -23,7 +23,7 @@ void put(std::string& out, const T& value) {
 // Reads fixed-size values from a byte range, throwing ReplayError past the end.
 class Reader {
  public:
-  Reader(const std::string& data, std::size_t end, const std::string& file)
+  Reader(std::span<const std::uint8_t> data, std::size_t end, const std::string& file)
       : data_(data), end_(end), file_(file) {}
   template <typename T>
   T get() {
@@ -32,15 +32,16 @@ class Reader {
     return value;
   }
   void bytes(void* out, std::size_t n) {
-    if (pos_ + n > end_) throw ReplayError("replay file " + file_ + " is truncated");
+    // Compared as a remainder: a damaged size near 2^64 would wrap pos_ + n.
+    if (n > end_ - pos_) throw ReplayError("replay file " + file_ + " is truncated");
     std::memcpy(out, data_.data() + pos_, n);
     pos_ += n;
   }
   std::size_t pos() const { return pos_; }
-  std::size_t remaining() const { return end_ - pos_; }
+  std::size_t left() const { return end_ - pos_; }
 
  private:
-  const std::string& data_;
+  std::span<const std::uint8_t> data_;
   std::size_t end_;
   std::string file_;
   std::size_t pos_ = 0;
@@ -153,7 +154,7 @@ SequenceBatch ReplayBuffer::sample(int batch, int length) {
   return out;
 }
 
-void ReplayBuffer::save(const std::filesystem::path& path) const {
+std::vector<std::uint8_t> ReplayBuffer::to_bytes() const {
   std::string out;
   out.append(kMagic, 4);
   put(out, kVersion);
@@ -181,10 +182,15 @@ void ReplayBuffer::save(const std::filesystem::path& path) const {
     }
   }
   put(out, indrive::crc32(reinterpret_cast<const std::uint8_t*>(out.data()), out.size()));
+  return {out.begin(), out.end()};
+}
+
+void ReplayBuffer::save(const std::filesystem::path& path) const {
+  const std::vector<std::uint8_t> out = to_bytes();
   const std::filesystem::path temp = path.string() + ".tmp";
   {
     std::ofstream file(temp, std::ios::binary | std::ios::trunc);
-    file.write(out.data(), static_cast<std::streamsize>(out.size()));
+    file.write(reinterpret_cast<const char*>(out.data()), static_cast<std::streamsize>(out.size()));
     if (!file) throw ReplayError("cannot write replay file " + temp.string() + ": check the disk");
   }
   std::error_code error;
@@ -196,15 +202,18 @@ void ReplayBuffer::save(const std::filesystem::path& path) const {
 void ReplayBuffer::load(const std::filesystem::path& path) {
   std::ifstream file(path, std::ios::binary);
   if (!file) throw ReplayError("cannot open replay file " + path.string());
-  std::string data((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
-  const std::string name = path.string();
+  const std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(file)),
+                                       std::istreambuf_iterator<char>());
+  load(data, path.string());
+}
+
+void ReplayBuffer::load(std::span<const std::uint8_t> data, const std::string& name) {
   if (data.size() < 8 || std::memcmp(data.data(), kMagic, 4) != 0) {
     throw ReplayError("file " + name + " is not a replay file");
   }
   std::uint32_t stored_crc;
   std::memcpy(&stored_crc, data.data() + data.size() - 4, 4);
-  if (indrive::crc32(reinterpret_cast<const std::uint8_t*>(data.data()), data.size() - 4) !=
-      stored_crc) {
+  if (indrive::crc32(data.data(), data.size() - 4) != stored_crc) {
     throw ReplayError("replay file " + name + " is corrupt (checksum mismatch)");
   }
   Reader in(data, data.size() - 4, name);
@@ -222,9 +231,9 @@ void ReplayBuffer::load(const std::filesystem::path& path) {
         (options_.has_rewards ? " with" : " without") + " rewards (another preset or phase?)");
   }
   const std::int64_t total_added = in.get<std::int64_t>();
-  // Sizes read from the file are checked against the bytes left before anything is allocated.
+  // A size the data cannot hold is refused before it is allocated.
   const std::uint64_t rng_size = in.get<std::uint64_t>();
-  if (rng_size > in.remaining()) throw ReplayError("replay file " + name + " is truncated");
+  if (rng_size > in.left()) throw ReplayError("replay file " + name + " is truncated");
   std::string rng_state(rng_size, '\0');
   in.bytes(rng_state.data(), rng_state.size());
   std::map<int, std::deque<Stored>> streams;
@@ -243,7 +252,7 @@ void ReplayBuffer::load(const std::filesystem::path& path) {
       stored.step.is_first = flags & 1, stored.step.is_last = flags & 2,
       stored.step.is_terminal = flags & 4;
       stored.step.reward = in.get<float>();
-      if (in.remaining() < pixels) throw ReplayError("replay file " + name + " is truncated");
+      if (in.left() < pixels) throw ReplayError("replay file " + name + " is truncated");
       stored.step.frame.resize(pixels);
       in.bytes(stored.step.frame.data(), pixels);
       // What add() refuses may not enter by a file either: the sampler trusts these ranges.

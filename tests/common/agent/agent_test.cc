@@ -3,10 +3,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <fstream>
+#include <iterator>
 
 #include "dot_env.h"
 #include "indrive/common/agent/policy.h"
+#include "indrive/common/checksum.h"
 #include "testing.h"
 
 namespace indrive::agent {
@@ -192,6 +195,50 @@ TEST(Agent, CheckpointErrorsAreTyped) {
     f.put('\x55');
   }
   EXPECT_THROW(a.load_checkpoint(path), AgentError);
+}
+
+TEST(Agent, CheckpointBytesAreTheFileAndLoadFromMemory) {
+  indrive::testing::TempDir dir;
+  Agent a(tiny_config());
+  const auto path = dir.path() / "a.ckpt";
+  a.save_checkpoint(path);
+  std::ifstream file(path, std::ios::binary);
+  const std::vector<std::uint8_t> on_disk((std::istreambuf_iterator<char>(file)),
+                                          std::istreambuf_iterator<char>());
+  const std::vector<std::uint8_t> bytes = a.checkpoint_bytes();
+  EXPECT_EQ(bytes, on_disk);
+  AgentConfig other_seed = tiny_config();
+  other_seed.seed = 99;
+  Agent b(other_seed);
+  b.load_checkpoint(bytes, "memory");
+  EXPECT_EQ(b.snapshot(), a.snapshot()) << "every parameter came from the bytes";
+  auto damaged = bytes;
+  damaged[100] ^= 0x01;
+  try {
+    b.load_checkpoint(damaged, "memory");
+    FAIL() << "a damaged checkpoint loaded";
+  } catch (const AgentError& error) {
+    EXPECT_NE(std::string(error.what()).find("checkpoint memory is corrupt"), std::string::npos)
+        << error.what();
+  }
+}
+
+// A section size near 2^64 (with the checksum made to match, as a crafted file would) is
+// refused as truncation instead of wrapping around past the bounds check.
+TEST(Agent, ASectionSizeThatWrapsAroundIsTruncation) {
+  Agent a(tiny_config());
+  auto bytes = a.checkpoint_bytes();
+  const std::uint64_t size = ~std::uint64_t{0} - 4;
+  std::memcpy(bytes.data() + 8, &size, sizeof size);  // the first section, after magic + version
+  const std::uint32_t crc = indrive::crc32(bytes.data(), bytes.size() - 4);
+  std::memcpy(bytes.data() + bytes.size() - 4, &crc, sizeof crc);
+  try {
+    a.load_checkpoint(bytes, "crafted");
+    FAIL() << "a wrapped section size loaded";
+  } catch (const AgentError& error) {
+    EXPECT_NE(std::string(error.what()).find("checkpoint crafted is truncated"), std::string::npos)
+        << error.what();
+  }
 }
 
 TEST(Policy, ActsFromSnapshotBytesOnly) {

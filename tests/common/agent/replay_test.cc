@@ -4,10 +4,10 @@
 
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <set>
 
 #include "indrive/common/checksum.h"
-#include "indrive/common/run_dir.h"
 #include "testing.h"
 
 namespace indrive::agent {
@@ -151,7 +151,7 @@ TEST(Replay, LoadRejectsCorruptOrForeignFiles) {
   EXPECT_EQ(b.size(), 0);
 }
 
-TEST(Replay, LoadRefusesWhatAddRefusesAndSizesBeyondTheFile) {
+TEST(Replay, LoadRefusesActionsAndClassIdsThatAddRefuses) {
   indrive::testing::TempDir dir;
   ReplayBuffer a(small_options());
   for (int i = 0; i < 9; ++i) a.add(0, make_step(i));  // actions 0..8, class ids 0..7
@@ -166,20 +166,54 @@ TEST(Replay, LoadRefusesWhatAddRefusesAndSizesBeyondTheFile) {
   fewer_classes.num_classes = 4;
   ReplayBuffer c(fewer_classes);
   EXPECT_THROW(c.load(path), ReplayError);
-  // A size field claiming 10^15 bytes (checksum made to match) is refused before allocating:
-  // the RNG state's length sits after magic, version, height, width, rewards and total_added.
-  auto bytes = read_file(path);
-  const std::uint64_t huge = 1000000000000000ull;
-  std::memcpy(bytes.data() + 25, &huge, 8);
-  const std::uint32_t crc = crc32(bytes.data(), bytes.size() - 4);
-  std::memcpy(bytes.data() + bytes.size() - 4, &crc, 4);
-  atomic_write(path, bytes);
-  ReplayBuffer d(small_options());
+}
+
+TEST(Replay, BytesAreTheFileAndLoadFromMemory) {
+  indrive::testing::TempDir dir;
+  ReplayBuffer a(small_options());
+  for (int i = 0; i < 5; ++i) a.add(0, make_step(i, i == 0));
+  a.save(dir.path() / "replay.bin");
+  std::ifstream file(dir.path() / "replay.bin", std::ios::binary);
+  const std::vector<std::uint8_t> on_disk((std::istreambuf_iterator<char>(file)),
+                                          std::istreambuf_iterator<char>());
+  const std::vector<std::uint8_t> bytes = a.to_bytes();
+  EXPECT_EQ(bytes, on_disk);
+  ReplayBuffer b(small_options());
+  b.load(bytes, "memory");
+  EXPECT_EQ(b.size(), 5);
+  EXPECT_EQ(b.sample(4, 2).frames, a.sample(4, 2).frames);
+  auto damaged = bytes;
+  damaged[30] ^= 0x01;
+  ReplayBuffer c(small_options());
   try {
-    d.load(path);
-    ADD_FAILURE() << "a replay file with an impossible size loaded";
+    c.load(damaged, "memory");
+    FAIL() << "a damaged buffer loaded";
   } catch (const ReplayError& error) {
-    EXPECT_NE(std::string(error.what()).find("truncated"), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find("replay file memory is corrupt"), std::string::npos)
+        << error.what();
+  }
+  EXPECT_EQ(c.size(), 0);
+}
+
+// A size field near 2^64 (with the checksum made to match, as a crafted file would) is refused
+// as truncation: neither allocated nor wrapped around past the bounds check.
+TEST(Replay, AHugeSizeFieldIsTruncationNotAnAllocation) {
+  ReplayBuffer a(small_options());
+  a.add(0, make_step(1, true));
+  auto bytes = a.to_bytes();
+  // magic 4, version 4, height 4, width 4, rewards 1, total added 8: the RNG state's size.
+  constexpr std::size_t kRngSizeAt = 25;
+  for (const std::uint64_t size : {std::uint64_t{1000000000000000}, ~std::uint64_t{0} - 8}) {
+    std::memcpy(bytes.data() + kRngSizeAt, &size, sizeof size);
+    const std::uint32_t crc = indrive::crc32(bytes.data(), bytes.size() - 4);
+    std::memcpy(bytes.data() + bytes.size() - 4, &crc, sizeof crc);
+    ReplayBuffer b(small_options());
+    try {
+      b.load(bytes, "crafted");
+      FAIL() << "a size of " << size << " loaded";
+    } catch (const ReplayError& error) {
+      EXPECT_NE(std::string(error.what()).find("truncated"), std::string::npos) << error.what();
+    }
   }
 }
 

@@ -70,7 +70,11 @@ class CheckpointFiles {
   CheckpointFiles(std::filesystem::path folder, int keep);
   // Writes a checkpoint atomically for `counter` (e.g. the update count), then deletes all
   // but the newest `keep`. Returns its path.
+  // Throws IoError when the file cannot be written (e.g. the disk is full); then the older
+  // checkpoints are untouched and no temporary file is left.
   std::filesystem::path save(std::uint64_t counter, std::span<const std::uint8_t> bytes);
+  // The path save(counter, ...) writes.
+  std::filesystem::path path(std::uint64_t counter) const;
   // The newest complete checkpoint, if any (temporary files of an interrupted write are
   // ignored).
   std::optional<std::filesystem::path> newest() const;

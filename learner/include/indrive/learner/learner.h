@@ -35,17 +35,20 @@ struct LearnerCounters {
   std::uint64_t learner_epoch = 0;  // starts of the learner in this run
 };
 
-// A learner checkpoint: a header line, the counters and section sizes as one JSON line, the
-// agent's own checkpoint bytes, then the replay buffer's file (ReplayBuffer::save) compressed
-// with zstd, so that a resumed learner trains on the data it had instead of refilling.
-// `replay_bytes` may be empty (no replay section).
+// A learner checkpoint (format version 3): a header line, the counters and section sizes as
+// one JSON line, the agent's own checkpoint bytes, then the replay buffer's file
+// (ReplayBuffer::save) compressed with zstd, so that a resumed learner trains on the data it had
+// instead of refilling, and a fixed-size trailer "CRC32 <8 hex digits>\n" with the CRC-32 of
+// every byte before it. `replay_bytes` may be empty (no replay section).
 std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
                                           std::span<const std::uint8_t> agent_bytes,
                                           std::span<const std::uint8_t> replay_bytes = {});
 // Splits a packed checkpoint into counters, agent bytes and (when `replay_bytes` is given) the
-// decompressed replay file, empty when the checkpoint has none. Reads the older format without
-// a replay section too. Throws CheckpointError when the bytes are not a learner checkpoint or
-// a section is truncated or corrupt.
+// decompressed replay file, empty when the checkpoint has none. Reads versions 1 (no replay
+// section) and 2 (no trailer) too. Throws CheckpointError when the bytes are not a learner
+// checkpoint or are truncated or damaged. Memory stays bounded by what the bytes hold: the
+// replay section is never given more room than its zstd frame produces, whatever the damaged
+// sizes of the counters line say.
 LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes = nullptr);
@@ -61,13 +64,21 @@ struct LearnerStats {
   std::uint64_t episodes = 0;
   std::uint64_t failed_updates = 0;
   std::uint64_t checkpoints = 0;
+  // Checkpoints that could not be written (disk full, I/O error); the run went on and the
+  // previous checkpoint stayed as it was.
+  std::uint64_t checkpoint_failures = 0;
   std::int64_t restored_replay_steps = 0;  // replay steps restored from the checkpoint
+  std::filesystem::path resumed_from;      // the checkpoint the learner resumed from, if any
+  // Damaged checkpoints, newer than resumed_from, that the resume skipped (and set aside).
+  std::uint64_t skipped_checkpoints = 0;
 };
 
 class Learner {
  public:
   // Opens the run directory (writes config.yaml), builds the agent and replay, resumes from
-  // the newest checkpoint if any, and sets up DDS. Throws CheckpointError, agent::AgentError,
+  // the newest checkpoint that restores completely (damaged newer ones are logged, skipped and
+  // renamed to <name>.damaged), and sets up DDS. Throws CheckpointError listing each file and
+  // its fault when there are checkpoints but none restores, and agent::AgentError,
   // dds::DdsError or IoError with what is wrong.
   explicit Learner(const actor::ServiceConfig& config);
   ~Learner();
@@ -76,8 +87,10 @@ class Learner {
 
   // Receives a console progress line every log interval (the executable prints it).
   void on_progress(std::function<void(const std::string&)> callback);
-  // Trains until the env-step budget is reached (returns 0) or `stop` is set (checkpoints,
-  // then returns 0).
+  // Trains until the env-step budget is reached or `stop` is set, then checkpoints and returns
+  // 0, or 1 when that final checkpoint could not be written (the log names the file and why).
+  // A periodic checkpoint that cannot be written is logged and counted (checkpoint_failures)
+  // and tried again at the next checkpoint time; training goes on.
   int run(const std::atomic<bool>& stop);
   const LearnerStats& stats() const;
 

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -88,6 +89,12 @@ class Agent {
   // pretrain checkpoint can start a finetune). Throws AgentError when the file is missing,
   // corrupt, or of another architecture.
   void load_checkpoint(const std::filesystem::path& path);
+  // The bytes save_checkpoint writes and load_checkpoint reads, in memory: the learner packs
+  // them into its own checkpoint file, so no staging file is written (and none is left behind
+  // when the disk is full). `name` names where the bytes came from in error messages. A failed
+  // load may leave the agent partly overwritten: load into a fresh agent when that matters.
+  std::vector<std::uint8_t> checkpoint_bytes() const;
+  void load_checkpoint(std::span<const std::uint8_t> bytes, const std::string& name);
 
   WorldModel& world_model() { return *wm_; }
   IntrinsicModule& intrinsic() { return *intrinsic_; }

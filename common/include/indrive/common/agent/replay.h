@@ -18,7 +18,9 @@
 #include <filesystem>
 #include <map>
 #include <random>
+#include <span>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace indrive::agent {
@@ -88,6 +90,11 @@ class ReplayBuffer {
   // Replaces the contents with a file written by save(). Throws ReplayError when the file is
   // missing, corrupt (checksum), or was written with other frame sizes or reward mode.
   void load(const std::filesystem::path& path);
+  // The bytes save() writes and load() reads, in memory (the learner packs them into its own
+  // checkpoint file). `name` names where the bytes came from in error messages. A failed load
+  // leaves the buffer unchanged.
+  std::vector<std::uint8_t> to_bytes() const;
+  void load(std::span<const std::uint8_t> bytes, const std::string& name);
 
  private:
   struct Stored {
