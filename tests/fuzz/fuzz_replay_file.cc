@@ -48,11 +48,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) { return fuzz::initialize(mak
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 1) return 0;
-  std::vector<std::uint8_t> file(data + 1, data + size);
-  if ((data[0] & 1) && file.size() >= 4) {
-    const std::uint32_t crc = crc32(file.data(), file.size() - 4);
-    std::memcpy(file.data() + file.size() - 4, &crc, 4);
-  }
+  const std::vector<std::uint8_t> file = fuzz::file_with_flags(data, size);
   agent::ReplayBuffer replay(options((data[0] & 2) != 0));
   const auto& path = fuzz::as_file(file.data(), file.size(), ".replay");
   bool loaded = false;

@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -30,6 +31,7 @@
 #include <vector>
 
 #include "indrive/common/agent/config.h"
+#include "indrive/common/checksum.h"
 #include "indrive/common/log.h"
 
 namespace indrive::fuzz {
@@ -82,6 +84,18 @@ inline int initialize(const std::function<void(const fs::path&)>& make_seeds) {
     std::exit(0);
   }
   return 0;
+}
+
+// The file of an input whose first byte is flags: the rest, and with flag bit 0 its CRC-32
+// trailer (the last 4 bytes, little-endian, over everything before them: the agent checkpoint's
+// and the replay file's layout) recomputed to match the damaged content.
+inline std::vector<std::uint8_t> file_with_flags(const std::uint8_t* data, std::size_t size) {
+  std::vector<std::uint8_t> file(data + 1, data + size);
+  if ((data[0] & 1) && file.size() >= 4) {
+    const std::uint32_t crc = crc32(file.data(), file.size() - 4);
+    std::memcpy(file.data() + file.size() - 4, &crc, 4);
+  }
+  return file;
 }
 
 // A per-process scratch file for decoders that read paths; kept on /dev/shm when it exists.
