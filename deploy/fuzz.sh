@@ -2,7 +2,7 @@
 # Fuzzes every decoder of outside bytes with libFuzzer (tests/fuzz/README.md).
 #
 #   deploy/fuzz.sh build                         # clang build with ASan + UBSan into build-fuzz/
-#   deploy/fuzz.sh run                           # every target 5 s (the test command does this)
+#   deploy/fuzz.sh run --seed 1                  # every target 5 s, fixed mutations (the tests)
 #   deploy/fuzz.sh run --seconds 600             # the long run: 10 minutes per target
 #   deploy/fuzz.sh run --seconds 60 chunk net    # some targets
 #   deploy/fuzz.sh list
@@ -46,10 +46,11 @@ build() {
 }
 
 run() {
-  local seconds=5 chosen=()
+  local seconds=5 seed=0 chosen=()
   while [[ $# -gt 0 ]]; do
     case $1 in
       --seconds) seconds=$2; shift 2 ;;
+      --seed) seed=$2; shift 2 ;;  # libFuzzer's -seed; 0 (default): a new one each run
       -h|--help) sed -n 2,17p "${BASH_SOURCE[0]}"; exit 0 ;;
       *) chosen+=("$1"); shift ;;
     esac
@@ -70,7 +71,7 @@ run() {
     # One allocation above 512 MB from one input, 2 GB of memory in all, or 10 s on one input
     # is a finding, as is any sanitizer report or an exception the decoder does not document.
     ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1} UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1} \
-      "$exe" -max_total_time="$seconds" -rss_limit_mb=2048 -malloc_limit_mb=512 -timeout=10 \
+      "$exe" -max_total_time="$seconds" -seed="$seed" -rss_limit_mb=2048 -malloc_limit_mb=512 -timeout=10 \
       -print_final_stats=1 -artifact_prefix="$findings/" \
       "$work/corpus" "$work/seeds" "$regressions" >"$log" 2>&1 || rc=$?
     local execs cov corpus

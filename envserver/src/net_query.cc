@@ -1,6 +1,7 @@
 // RoadNetwork queries and the uniform-grid spatial index behind them.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 
 #include "indrive/common/check.h"
@@ -12,6 +13,8 @@ namespace indrive::env {
 namespace {
 // Grid cell size: a few lane widths, so a cell holds a handful of segments.
 constexpr double kCellM = 8.0;
+// Cells of the index at most: 32 x 32 km at kCellM, about 0.8 GB of empty cell lists.
+constexpr double kMaxIndexCells = 16.0e6;
 // Segments are indexed this far beyond their lane surface, the largest margin lanes_at takes.
 constexpr double kMaxMarginM = 2.0;
 // A point this far beyond a lane's first or last point still counts as on the lane, so the
@@ -75,6 +78,21 @@ void RoadNetwork::build_index() {
       lo = lo.cwiseMin(p);
       hi = hi.cwiseMax(p);
     }
+  }
+  if (lanes_.empty() && junctions_.empty()) lo = hi = Eigen::Vector2d::Zero();
+  // The index is a dense grid of kCellM cells: coordinates from a damaged or foreign file
+  // (found by tests/fuzz, target net: 1e28 m overflowed the cell count) must not size it.
+  if (!lo.allFinite() || !hi.allFinite()) {
+    throw MapError("the network has coordinates that are not finite numbers");
+  }
+  // Cells along each side (plus one, so that a thin but long network counts too).
+  const double cells_x = (hi.x() - lo.x()) / kCellM + 1, cells_y = (hi.y() - lo.y()) / kCellM + 1;
+  if (cells_x * cells_y > kMaxIndexCells) {
+    char extent[96];
+    std::snprintf(extent, sizeof extent, "%.3g x %.3g m", hi.x() - lo.x(), hi.y() - lo.y());
+    throw MapError(std::string("the network spans ") + extent +
+                   "; at most about 32 x 32 km fit the spatial index: crop the map (netconvert "
+                   "--keep-edges.in-boundary)");
   }
   min_corner_ = lo;
   max_corner_ = hi;

@@ -50,6 +50,15 @@ TEST(NetParseTest, MalformedInputs) {
   EXPECT_THAT(parse_error("<net><edge id='x'><lane id='x_0' shape='0,0 5,0'/></edge>"
                           "<connection from='x' to='x' fromLane='0' toLane='0' dir='q'/></net>"),
               HasSubstr("unknown connection direction 'q'"));
+  // Coordinates that would size the spatial index beyond reason (found by tests/fuzz, target
+  // net: 1e28 m overflowed the cell count), or that are no finite numbers.
+  EXPECT_THAT(parse_error("<net><edge id='x'><lane id='x_0' shape='0,0 1e28,0'/></edge></net>"),
+              HasSubstr("at most about 32 x 32 km"));
+  EXPECT_THAT(parse_error("<net><edge id='x'><lane id='x_0' shape='0,0 40000,40000'/></edge>"
+                          "</net>"),
+              HasSubstr("crop the map"));
+  EXPECT_THAT(parse_error("<net><edge id='x'><lane id='x_0' shape='0,0 inf,0'/></edge></net>"),
+              HasSubstr("bad number 'inf'"));
 }
 
 TEST(NetParseTest, LoadsFromFileAndRemembersTheSource) {
