@@ -263,10 +263,14 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
   // out (a volatile topic does not replay them); those are counted from the sequence numbers,
   // at most L steps each. With none missed the comparison is exact.
   const std::int64_t missed = missed_chunks(seen, restart);
-  EXPECT_EQ(last.value("chunks", -1), chunks + missed) << last.dump();
-  EXPECT_GE(last.value("env_steps", -1), steps) << last.dump();
+  // The restarted actor starts from the run's seed like its predecessor, so its first chunks
+  // can repeat the killed process's byte for byte; the learner drops those as `duplicate`
+  // (at most L steps each) instead of storing the same experience twice.
+  const std::int64_t repeats = last.value("dropped_duplicate", 0);
+  EXPECT_EQ(last.value("chunks", -1), chunks + missed - repeats) << last.dump();
+  EXPECT_GE(last.value("env_steps", -1), steps - repeats * kChunkLength) << last.dump();
   EXPECT_LE(last.value("env_steps", -1), steps + missed * kChunkLength) << last.dump();
-  if (missed == 0) {
+  if (missed == 0 && repeats == 0) {
     EXPECT_EQ(last.value("env_steps", -1), steps) << last.dump();
   }
   EXPECT_EQ(last.value("replay_size", -1), last.value("env_steps", -2))
@@ -277,7 +281,7 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
       static_cast<long long>(last.value("env_steps", 0)),
       static_cast<long long>(last.value("chunks", 0)), static_cast<long long>(chunks),
       static_cast<long long>(missed));
-  EXPECT_EQ(last.value("dropped_chunks", -1), 0);
+  EXPECT_EQ(last.value("dropped_chunks", -1), repeats) << "no drop but exact repeats";
   EXPECT_NE(testing::slurp(run_dir_ / "logs" / "actor-0.log").find("acting with snapshot v"),
             std::string::npos);
 }
