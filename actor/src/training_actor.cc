@@ -174,9 +174,9 @@ struct TrainingActor::Impl {
   // a new one, which opens its transport ports again and is discovered afresh. Why: on one host a
   // process killed with SIGKILL leaves shared-memory ports behind that Fast DDS resets in every
   // process that touches them, and once (in CI, under load) an actor restarted after such a kill
-  // never heard the learner within 60 s; the cause was not reproduced in about 50 local runs. A learner
-  // that is merely gone is found again the same way when it returns. Called only where this actor
-  // waits for the learner.
+  // never heard the learner within 60 s; the cause was not reproduced in about 50 local runs. A
+  // learner that is merely gone is found again the same way when it returns. Called only where this
+  // actor waits for the learner.
   void maybe_rejoin() {
     if (rejoin_after_s <= 0.0) return;
     if (gate.silent_s() < rejoin_after_s || seconds_since(connected_at) < rejoin_after_s) return;
