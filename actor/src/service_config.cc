@@ -17,7 +17,8 @@ constexpr const char* kDefaultPreset = "cpu";
 // Agent keys whose text is not a number, with the values they may take.
 bool is_text_agent_key(const std::string& key) {
   static const std::set<std::string> text_keys = {
-      "preset", "phase", "task", "eval_sample", "intrinsic.method", "intrinsic.disag_reward"};
+      "preset",   "phase", "task", "eval_sample", "intrinsic.method", "intrinsic.disag_reward",
+      "precision"};
   return text_keys.contains(key);
 }
 
@@ -49,6 +50,10 @@ void declare_service_schema(config::Schema& schema) {
       schema.add_choice(name, text, {"disag", "icm", "rnd"}, "intrinsic reward of pretraining");
     } else if (key == "intrinsic.disag_reward") {
       schema.add_choice(name, text, {"variance", "std"}, "how disagreement becomes a reward");
+    } else if (key == "precision") {
+      schema.add_choice(name, text, {"auto", "fp32", "bf16"},
+                        "operands of the learner's matrix products: auto is bf16 where the CPU "
+                        "multiplies it natively (AMX, AVX512_BF16), else fp32");
     } else if (key == "eval_sample") {
       schema.add_bool(name, text == "true", "evaluation samples actions instead of the mode");
     } else {

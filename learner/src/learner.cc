@@ -20,6 +20,7 @@
 #include "indrive/common/checksum.h"
 #include "indrive/common/dds.h"
 #include "indrive/common/log.h"
+#include "indrive/common/nn/kernels.h"
 #include "indrive/common/run_dir.h"
 #include "indrive/learner/ingest.h"
 #include "indrive/learner/rate_limiter.h"
@@ -309,6 +310,7 @@ struct Learner::Impl {
                                   << stats.counters.updates << " updates, policy v"
                                   << stats.counters.policy_version << "); architecture '"
                                   << actor::architecture_descriptor(agent_config) << "'";
+    INDRIVE_LOG(kInfo, "learner") << nn::kernel_report();
   }
 
   ~Impl() {

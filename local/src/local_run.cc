@@ -17,6 +17,7 @@
 #include "indrive/common/check.h"
 #include "indrive/common/episode_csv.h"
 #include "indrive/common/log.h"
+#include "indrive/common/nn/kernels.h"
 #include "indrive/common/run_dir.h"
 #include "indrive/envserver/town.h"
 #include "indrive/learner/learner.h"
@@ -141,6 +142,7 @@ struct LocalRun::Impl {
     log_every_steps = c.get<std::int64_t>("learner.log_every_env_steps");
     checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
     c.write_yaml(run.config_path());
+    INDRIVE_LOG(kInfo, "local") << nn::kernel_report();
     resume();
   }
 

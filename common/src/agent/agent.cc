@@ -7,6 +7,7 @@
 
 #include "indrive/common/check.h"
 #include "indrive/common/checksum.h"
+#include "indrive/common/nn/kernels.h"
 
 namespace indrive::agent {
 
@@ -82,18 +83,22 @@ std::vector<std::int64_t> architecture(const AgentConfig& c) {
           c.behavior.units,
           c.behavior.layers};
 }
-// Seconds since the last call (or construction): one stage of an update at a time.
+// Seconds since the last call (or construction), and the product FLOPs in that time
+// (nn::gemm_flops, into *flops): one stage of an update at a time.
 class StageClock {
  public:
-  double lap() {
+  double lap(double* flops) {
     const auto now = std::chrono::steady_clock::now();
     const double s = std::chrono::duration<double>(now - last_).count();
-    last_ = now;
+    const std::uint64_t f = nn::gemm_flops();
+    *flops = static_cast<double>(f - flops_);
+    last_ = now, flops_ = f;
     return s;
   }
 
  private:
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+  std::uint64_t flops_ = nn::gemm_flops();
 };
 }  // namespace
 
@@ -107,6 +112,11 @@ TrainMetrics StepTiming::as_metrics() const {
 
 Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   validate(config_);
+  try {
+    nn::set_precision(nn::resolve_precision(config_.precision));
+  } catch (const nn::PrecisionError& e) {
+    throw AgentConfigError(std::string("agent.") + e.what());
+  }
   wm_ = std::make_unique<WorldModel>(config_.world_model, rng_);
   intrinsic_ = make_intrinsic(config_.intrinsic, config_.world_model, rng_);
   expl_ =
@@ -149,6 +159,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   }
   StageClock clock;
   timing_ = {};
+  flops_ = {};
   nn::Graph& graph = nn::current_graph();
   graph.reset();
   TrainMetrics metrics;
@@ -176,7 +187,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
                                  {"wm/rep", out.rep},
                                  {"wm/cont", out.cont}});
   if (task_phase) metrics.emplace_back("wm/reward", out.reward);
-  timing_.world_model = clock.lap();
+  timing_.world_model = clock.lap(&flops_.world_model);
 
   // Intrinsic module: trained on replay transitions in pretraining only.
   if (phase == Phase::kPretrain) {
@@ -186,7 +197,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     Tensor intrinsic_loss = intrinsic_->loss(tr);
     total = nn::add(total, intrinsic_loss);
     metrics.emplace_back("intrinsic/loss", intrinsic_->last_loss());
-    timing_.intrinsic = clock.lap();
+    timing_.intrinsic = clock.lap(&flops_.intrinsic);
   }
 
   // Behaviour in imagination from every posterior state.
@@ -200,7 +211,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     for (float x : terminal.values()) start_cont.push_back(1.0f - x);
   }
   ImaginedTrajectory traj = behavior.imagine(*wm_, start, rng_, std::move(start_cont));
-  timing_.imagine = clock.lap();
+  timing_.imagine = clock.lap(&flops_.imagine);
   std::vector<float> rewards;
   {
     nn::NoGradGuard no_grad;
@@ -213,7 +224,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
       metrics.emplace_back("intrinsic/raw_std", intrinsic_->last_raw_std());
     }
   }
-  timing_.reward = clock.lap();
+  timing_.reward = clock.lap(&flops_.reward);
   BehaviorMetrics bm;
   total = nn::add(total, behavior.loss(traj, rewards, &bm));
   const std::string prefix = task_phase ? "task/" : "expl/";
@@ -224,12 +235,12 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
                                  {prefix + "actor_loss", bm.actor_loss},
                                  {prefix + "critic_loss", bm.critic_loss},
                                  {prefix + "entropy", bm.entropy}});
-  timing_.behavior = clock.lap();
+  timing_.behavior = clock.lap(&flops_.behavior);
 
   // One backward for all losses; stop-gradients keep each loss inside its own part, and only
   // the optimisers of the parts that train in this phase are stepped.
   graph.backward(total);
-  timing_.backward = clock.lap();
+  timing_.backward = clock.lap(&flops_.backward);
   if (phase != Phase::kFinetune) {
     const nn::StepStats s = wm_opt_->step();
     metrics.emplace_back("wm/grad_norm", s.grad_norm);
@@ -243,7 +254,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   // Gradients that reached frozen parts (none should) are dropped, never applied later.
   wm_->params().zero_grad();
   intrinsic_->params().zero_grad();
-  timing_.optimizers = clock.lap();
+  timing_.optimizers = clock.lap(&flops_.optimizers);
   ++train_steps_;
   return metrics;
 }

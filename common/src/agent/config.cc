@@ -59,6 +59,8 @@ const std::vector<Key>& keys() {
       Key{"eval_sample",
           [](const AgentConfig& c) { return std::string(c.eval_sample ? "true" : "false"); },
           [](AgentConfig& c, std::string_view v) { c.eval_sample = parse_bool("eval_sample", v); }},
+      Key{"precision", [](const AgentConfig& c) { return c.precision; },
+          [](AgentConfig& c, std::string_view v) { c.precision = std::string(v); }},
       INDRIVE_NUMBER_KEY("seed", seed),
       INDRIVE_NUMBER_KEY("world_model.image", world_model.image),
       INDRIVE_NUMBER_KEY("world_model.channels", world_model.channels),
@@ -187,6 +189,8 @@ std::vector<std::pair<std::string, std::string>> config_values(const AgentConfig
 }
 
 void validate(const AgentConfig& config) {
+  require(config.precision == "auto" || config.precision == "fp32" || config.precision == "bf16",
+          "precision must be auto, fp32 or bf16, got '" + config.precision + "'");
   const WorldModelConfig& wm = config.world_model;
   require(wm.image >= 8 && (wm.image & (wm.image - 1)) == 0,
           "world_model.image must be a power of two >= 8, got " + std::to_string(wm.image));

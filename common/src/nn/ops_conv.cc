@@ -1,4 +1,6 @@
-// NHWC convolution and transposed convolution as im2col + GEMM.
+// NHWC convolution and transposed convolution as im2col + GEMM (the products in the kernel
+// layer, kernels.h). oneDNN's own convolution primitives were measured in their place
+// (docs/architecture.md, section 8: kernel layer) and were not faster over a whole update.
 //
 // Both ops relate a "big" grid (Hb, Wb) and a "small" grid (Hs, Ws) by
 //   big = small * stride - padding + kernel_offset,
@@ -151,13 +153,15 @@ void conv2d_backward(Node& n) {
   for (std::int64_t i0 = 0; i0 < g.n; i0 += chunk) {
     const std::int64_t images = std::min(chunk, g.n - i0);
     const std::int64_t rows = images * g.rows_per_image();
-    auto gy = cmat(n.grad + i0 * g.rows_per_image() * oc, rows, oc);
+    const auto gy =
+        detail::final_grad(detail::operand(cmat(n.grad + i0 * g.rows_per_image() * oc, rows, oc)));
     if (gw) {
       im2col(g, x->value + i0 * g.hb * g.wb * g.c, images, cols);
       detail::gemm(mat(gw, patch, oc), cmat(cols, rows, patch).transpose(), gy, true);
     }
     if (gx) {
-      detail::gemm(mat(cols, rows, patch), gy, cmat(w->value, patch, oc).transpose(), false);
+      detail::gemm(mat(cols, rows, patch), gy,
+                   detail::held(detail::operand(cmat(w->value, patch, oc).transpose()), w), false);
       col2im(g, cols, images, gx + i0 * g.hb * g.wb * g.c);
     }
   }
@@ -182,11 +186,12 @@ void conv_transpose2d_backward(Node& n) {
     const std::int64_t rows = images * g.rows_per_image();
     im2col(g, n.grad + i0 * g.hb * g.wb * g.c, images, cols);
     auto gcols = cmat(cols, rows, patch);
-    auto xin = cmat(x->value + i0 * g.rows_per_image() * ic, rows, ic);
-    if (gw) detail::gemm(mat(gw, ic, patch), xin.transpose(), gcols, true);
+    const auto xin = detail::held(
+        detail::operand(cmat(x->value + i0 * g.rows_per_image() * ic, rows, ic).transpose()), x);
+    if (gw) detail::gemm(mat(gw, ic, patch), xin, gcols, true);
     if (gx)
       detail::gemm(mat(gx + i0 * g.rows_per_image() * ic, rows, ic), gcols,
-                   cmat(w->value, ic, patch).transpose(), !fresh);
+                   detail::held(detail::operand(cmat(w->value, ic, patch).transpose()), w), !fresh);
   }
 }
 
@@ -218,7 +223,7 @@ Tensor conv2d(Tensor x, Tensor w, Tensor bias, ConvGeometry geom) {
     const std::int64_t rows = images * g.rows_per_image();
     im2col(g, x.data() + i0 * g.hb * g.wb * g.c, images, cols);
     detail::gemm(mat(n->value + i0 * g.rows_per_image() * oc, rows, oc), cmat(cols, rows, patch),
-                 cmat(w.data(), patch, oc), false);
+                 detail::held(detail::operand(cmat(w.data(), patch, oc)), w.node()), false);
   }
   if (bias.defined()) {
     INDRIVE_CHECK_EQ(bias.numel(), oc) << "conv2d bias";
@@ -255,8 +260,11 @@ Tensor conv_transpose2d(Tensor x, Tensor w, Tensor bias, ConvGeometry geom) {
   for (std::int64_t i0 = 0; i0 < g.n; i0 += chunk) {
     const std::int64_t images = std::min(chunk, g.n - i0);
     const std::int64_t rows = images * g.rows_per_image();
-    detail::gemm(mat(cols, rows, patch), cmat(x.data() + i0 * g.rows_per_image() * ic, rows, ic),
-                 cmat(w.data(), ic, patch), false);
+    detail::gemm(
+        mat(cols, rows, patch),
+        detail::held(detail::operand(cmat(x.data() + i0 * g.rows_per_image() * ic, rows, ic)),
+                     x.node()),
+        detail::held(detail::operand(cmat(w.data(), ic, patch)), w.node()), false);
     col2im(g, cols, images, n->value + i0 * g.hb * g.wb * g.c);
   }
   if (bias.defined()) {

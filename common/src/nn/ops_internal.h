@@ -7,6 +7,7 @@
 #include <cstdint>
 
 #include "indrive/common/check.h"
+#include "indrive/common/nn/kernels.h"
 #include "indrive/common/nn/tensor.h"
 
 namespace indrive::nn::detail {
@@ -51,58 +52,45 @@ inline ConstMatrixMap cmat(const float* p, std::int64_t rows, std::int64_t cols)
   return ConstMatrixMap(p, rows, cols);
 }
 
-// Products with at least this many multiply-adds are split over threads; smaller ones run on
-// the calling thread, because a parallel region costs more than it saves (and much more when
-// the machine is oversubscribed and idle threads spin).
-inline constexpr std::int64_t kParallelGemmWork = std::int64_t{1} << 22;
-
-// Runs Eigen's GEMM single-threaded: the engine splits large products itself (below), so that
-// the thread count is ours to set and small products never open a parallel region.
-inline void eigen_single_threaded() {
-  static const bool once = (Eigen::setNbThreads(1), true);
-  (void)once;
+// An operand of a product as the kernel layer takes it: a row-major map, or the transpose of one.
+inline GemmOperand operand(const ConstMatrixMap& m) {
+  return {m.data(), m.rows(), m.cols(), false};
+}
+inline GemmOperand operand(const MatrixMap& m) { return {m.data(), m.rows(), m.cols(), false}; }
+template <typename Map>
+GemmOperand operand(const Eigen::Transpose<Map>& t) {
+  const auto& m = t.nestedExpression();
+  return {m.data(), m.cols(), m.rows(), true};
 }
 
-// dst (m, n) = a (m, k) * b (k, n), or += when `accumulate`. a and b may be transposed maps.
-// Large products are split over output rows (or columns when there are few rows).
+// The operand of a node's value (or of its gradient, once final) with the lifetime its bf16
+// copy may be kept for: a parameter's (or a view of one) per version, any other node's per
+// graph.
+inline GemmOperand held(GemmOperand op, const Node* node) {
+  const Node* root = node;
+  while (root->view_of != nullptr) root = root->view_of;
+  if (root->persistent) {
+    op.lifetime = Lifetime::kVersioned;
+    op.version = &root->version;
+  } else {
+    op.lifetime = Lifetime::kGraphValue;
+  }
+  return op;
+}
+// The operand of a gradient buffer that is final (the node's own, in its backward).
+inline GemmOperand final_grad(GemmOperand op) {
+  op.lifetime = Lifetime::kGraphValue;
+  return op;
+}
+
+// dst (m, n) = a (m, k) * b (k, n), or += when `accumulate`. a and b may be transposed maps
+// (or operands made from them); the product runs in the kernel layer (kernels.h).
+inline GemmOperand operand(const GemmOperand& op) { return op; }
 template <typename Dst, typename A, typename B>
 void gemm(Dst&& dst, const A& a, const B& b, bool accumulate) {
-  eigen_single_threaded();
-  const std::int64_t m = dst.rows(), n = dst.cols(), k = a.cols();
-  const int threads = omp_in_parallel() ? 1 : omp_get_max_threads();
-  if (threads == 1 || m * n * k < kParallelGemmWork) {
-    if (accumulate)
-      dst.noalias() += a * b;
-    else
-      dst.noalias() = a * b;
-    return;
-  }
-  const bool by_rows = m >= 64 * threads || m >= n;
-  const std::int64_t extent = by_rows ? m : n;
-  // A few parts per thread, handed out dynamically, so that a thread delayed by other jobs on
-  // the machine does not hold the rest at the barrier. Parts split on multiples of 16 so that
-  // each keeps full SIMD panels; every output element is computed by one part with the same
-  // code whichever thread runs it, so results do not depend on the schedule.
-  const std::int64_t parts =
-      std::max<std::int64_t>(1, std::min<std::int64_t>(4 * threads, extent / 64));
-  const std::int64_t part = ((extent + parts - 1) / parts + 15) / 16 * 16;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (std::int64_t t = 0; t < parts; ++t) {
-    const std::int64_t begin = std::min(extent, t * part);
-    const std::int64_t len = std::min(extent, begin + part) - begin;
-    if (len <= 0) continue;
-    if (by_rows) {
-      if (accumulate)
-        dst.middleRows(begin, len).noalias() += a.middleRows(begin, len) * b;
-      else
-        dst.middleRows(begin, len).noalias() = a.middleRows(begin, len) * b;
-    } else {
-      if (accumulate)
-        dst.middleCols(begin, len).noalias() += a * b.middleCols(begin, len);
-      else
-        dst.middleCols(begin, len).noalias() = a * b.middleCols(begin, len);
-    }
-  }
+  const GemmOperand ga = operand(a), gb = operand(b);
+  INDRIVE_CHECK(dst.rows() == ga.rows && dst.cols() == gb.cols) << "product destination shape";
+  gemm(dst.data(), ga, gb, accumulate);
 }
 
 // Normalises a possibly negative axis and checks it.

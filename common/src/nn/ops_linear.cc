@@ -1,4 +1,4 @@
-// Matrix product and the fused linear layer (x * w + b) on Eigen's GEMM.
+// Matrix product and the fused linear layer (x * w + b) on the kernel layer's products.
 #include "indrive/common/nn/ops.h"
 #include "ops_internal.h"
 
@@ -6,8 +6,10 @@ namespace indrive::nn {
 
 using detail::cmat;
 using detail::grad_of;
+using detail::held;
 using detail::mat;
 using detail::Node;
+using detail::operand;
 
 namespace {
 
@@ -17,13 +19,14 @@ void linear_backward(Node& n) {
   Node* w = n.in[1];
   Node* b = n.in[2];
   const std::int64_t m = n.iparam[0], k = n.iparam[1], cols = n.iparam[2];
-  auto gy = cmat(n.grad, m, cols);
+  // n.grad is final here, so its bf16 copy (where products run in bf16) serves both products.
+  const auto gy = detail::final_grad(detail::operand(cmat(n.grad, m, cols)));
   bool fresh = false;
   if (float* gx = detail::grad_for_write(x, &fresh))
-    detail::gemm(mat(gx, m, k), gy, cmat(w->value, k, cols).transpose(), !fresh);
+    detail::gemm(mat(gx, m, k), gy, held(operand(cmat(w->value, k, cols).transpose()), w), !fresh);
   if (float* gw = grad_of(w))
-    detail::gemm(mat(gw, k, cols), cmat(x->value, m, k).transpose(), gy, true);
-  if (float* gb = grad_of(b)) mat(gb, 1, cols) += gy.colwise().sum();
+    detail::gemm(mat(gw, k, cols), held(operand(cmat(x->value, m, k).transpose()), x), gy, true);
+  if (float* gb = grad_of(b)) mat(gb, 1, cols) += cmat(n.grad, m, cols).colwise().sum();
 }
 
 Tensor linear_impl(Tensor x, Tensor w, Tensor bias) {
@@ -35,7 +38,8 @@ Tensor linear_impl(Tensor x, Tensor w, Tensor bias) {
   Graph& g = current_graph();
   Node* n = g.new_node(detail::with_last(x.shape(), cols));
   auto y = mat(n->value, m, cols);
-  detail::gemm(y, cmat(x.data(), m, k), cmat(w.data(), k, cols), false);
+  detail::gemm(y, held(operand(cmat(x.data(), m, k)), x.node()),
+               held(operand(cmat(w.data(), k, cols)), w.node()), false);
   if (bias.defined()) {
     INDRIVE_CHECK_EQ(bias.numel(), cols) << "bias of shape " << bias.shape().str();
     y.rowwise() += cmat(bias.data(), 1, cols).row(0);

@@ -16,6 +16,7 @@
 #endif
 
 #include "indrive/common/check.h"
+#include "indrive/common/nn/kernels.h"
 
 namespace indrive::nn {
 
@@ -159,6 +160,7 @@ std::size_t Graph::arena_capacity_bytes() const {
 }
 
 void Graph::reset() {
+  detail::forget_graph_conversions();
   high_water_ = std::max(high_water_, arena_used_bytes());
   for (Block& b : blocks_) b.used = 0;
   current_ = 0;
@@ -176,6 +178,7 @@ Graph::Mark Graph::mark() const {
 }
 
 void Graph::rewind(const Mark& mark) {
+  detail::forget_graph_conversions();
   INDRIVE_CHECK_EQ(tape_.size(), mark.tape)
       << "rewind() past recorded ops: only scratch work under NoGradGuard can be rewound";
   INDRIVE_CHECK(mark.block <= current_ && num_nodes_ >= mark.nodes)
@@ -313,6 +316,7 @@ Parameter::Parameter(std::string name, const Shape& shape)
   node_.grad = grad_.data();
   node_.requires_grad = true;
   node_.persistent = true;
+  node_.version = detail::next_parameter_version();
 }
 
 void Parameter::zero_grad() { std::fill(grad_.begin(), grad_.end(), 0.0f); }

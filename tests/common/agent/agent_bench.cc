@@ -2,7 +2,13 @@
 // shared/bench) and per full agent update (world model + intrinsic module + imagination +
 // actor-critic) for a preset, and where the agent update's time goes by stage.
 // Usage: common_agent_bench [--preset tiny|cpu|small] [--threads N] [--iters N] [--method disag]
+//                           [--precision auto|fp32|bf16] [--kernels onednn|eigen]
+//                           [--torch PATH/torch_agent_step.py]
 //                           [--set agent.KEY=VALUE ...]  (e.g. --set replay.length=16)
+// Prints, per stage and in total, seconds, the matrix-product FLOPs (nn::gemm_flops) and
+// GFLOP/s, against the fp32 and bf16 product peaks measured in the same run. With --torch, and
+// where python3 imports torch, also runs that PyTorch reference on the same preset and thread
+// count and prints the ratio of the two.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -12,9 +18,11 @@
 #include <ctime>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "indrive/common/agent/agent.h"
+#include "indrive/common/nn/kernels.h"
 
 namespace {
 
@@ -70,10 +78,63 @@ struct Samples {
   }
 };
 
+// The best GFLOP/s of the kernel layer's product on square sizes, at the current precision.
+double product_peak() {
+  double best = 0;
+  for (const std::int64_t n : {512, 1024, 2048}) {
+    std::vector<float> a(n * n, 0.5f), b(n * n, 0.25f), c(n * n);
+    const nn::detail::GemmOperand ga{a.data(), n, n, false}, gb{b.data(), n, n, false};
+    nn::detail::gemm(c.data(), ga, gb, false);  // creates the primitive
+    const int reps = n >= 2048 ? 3 : 10;
+    for (int r = 0; r < reps; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      nn::detail::gemm(c.data(), ga, gb, false);
+      const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      best = std::max(best, 2.0 * n * n * n / t / 1e9);
+    }
+  }
+  return best;
+}
+
+// Runs the PyTorch reference; its seconds per update, or a negative value (and why, on stderr).
+double torch_reference(const std::string& script, const std::string& preset, int threads,
+                       int iters) {
+  // Debian's python3-torch is installed for the system interpreter, which another python3
+  // earlier on PATH may hide.
+  std::string python;
+  for (const char* candidate : {"python3", "/usr/bin/python3"}) {
+    if (std::system((std::string(candidate) + " -c 'import torch' >/dev/null 2>&1").c_str()) == 0) {
+      python = candidate;
+      break;
+    }
+  }
+  if (python.empty()) {
+    std::fprintf(stderr,
+                 "torch reference skipped: python3 cannot import torch "
+                 "(apt-get install python3-torch)\n");
+    return -1;
+  }
+  const std::string cmd = python + " '" + script + "' --preset " + preset + " --threads " +
+                          std::to_string(threads) + " --iters " + std::to_string(iters) + " 2>&1";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return -1;
+  std::string out;
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, pipe)) out += buf;
+  const int rc = pclose(pipe);
+  const std::size_t at = out.find("sec_per_update=");
+  if (rc != 0 || at == std::string::npos) {
+    std::fprintf(stderr, "torch reference failed (exit %d):\n%s", rc, out.c_str());
+    return -1;
+  }
+  std::printf("torch_reference %s", out.c_str());
+  return std::atof(out.c_str() + at + 15);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string preset = "tiny", method = "disag";
+  std::string preset = "tiny", method = "disag", precision = "auto", kernels = "onednn", torch;
   std::vector<std::string> sets;
   int threads = 2, iters = 5;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -86,6 +147,12 @@ int main(int argc, char** argv) {
       iters = std::atoi(argv[i + 1]);
     else if (key == "--method")
       method = argv[i + 1];
+    else if (key == "--precision")
+      precision = argv[i + 1];
+    else if (key == "--kernels")
+      kernels = argv[i + 1];
+    else if (key == "--torch")
+      torch = argv[i + 1];
     else if (key == "--set")
       sets.push_back(argv[i + 1]);
     else {
@@ -98,8 +165,20 @@ int main(int argc, char** argv) {
   }
   try {
     nn::set_threads(threads);
+    if (kernels != "onednn" && kernels != "eigen")
+      throw std::runtime_error("--kernels wants onednn or eigen, got " + kernels);
+    nn::set_use_onednn(kernels == "onednn");
+    // The product peaks of this run: fp32, and bf16 where the CPU has it.
+    nn::set_precision(nn::Precision::kFp32);
+    const double peak_fp32 = product_peak();
+    double peak_bf16 = 0;
+    if (nn::bf16_supported() && nn::use_onednn()) {
+      nn::set_precision(nn::Precision::kBf16);
+      peak_bf16 = product_peak();
+    }
     AgentConfig config = indrive::agent::preset(preset);
     indrive::agent::set_config_value(config, "intrinsic.method", method);
+    indrive::agent::set_config_value(config, "precision", precision);
     for (const std::string& kv : sets) {
       const std::size_t eq = kv.find('=');
       if (eq == std::string::npos) throw std::runtime_error("--set wants KEY=VALUE, got " + kv);
@@ -108,6 +187,10 @@ int main(int argc, char** argv) {
       indrive::agent::set_config_value(config, key, kv.substr(eq + 1));
     }
     indrive::agent::Agent agent(config);
+    if (!nn::use_onednn() && nn::precision() == nn::Precision::kBf16)
+      throw std::runtime_error("--kernels eigen runs fp32 only: add --precision fp32");
+    std::printf("%s\n", nn::kernel_report().c_str());
+    std::printf("product_peak fp32_gflops=%.0f bf16_gflops=%.0f\n", peak_fp32, peak_bf16);
     const SequenceBatch batch = random_batch(config, 1);
     const double frames = static_cast<double>(batch.batch) * batch.length;
 
@@ -115,7 +198,7 @@ int main(int argc, char** argv) {
     nn::Adam adam(agent.world_model().params(), {.lr = 1e-4f, .eps = 1e-8f, .clip = 1000.0f});
     nn::Rng rng(1);
     Samples wm_samples, agent_samples;
-    std::vector<indrive::agent::StepTiming> stages;
+    std::vector<indrive::agent::StepTiming> stages, stage_flops;
     for (int i = 0; i <= iters; ++i) {
       const auto t0 = std::chrono::steady_clock::now();
       const Usage u0 = Usage::now();
@@ -129,7 +212,9 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       const Usage u0 = Usage::now();
       agent.train_step(batch);
-      if (i > 0) agent_samples.add(t0, u0), stages.push_back(agent.last_timing());
+      if (i > 0)
+        agent_samples.add(t0, u0), stages.push_back(agent.last_timing()),
+            stage_flops.push_back(agent.last_flops());
     }
     std::int64_t params = 0;
     for (auto* g : agent.groups()) params += g->numel();
@@ -146,23 +231,44 @@ int main(int argc, char** argv) {
         "imagined_states_per_sec=%.0f\n",
         full, median(agent_samples.cpu), median(agent_samples.faults), frames / full,
         frames * config.behavior.horizon / full);
-    // Median of each stage over the measured updates, and its share of their sum.
-    std::printf("agent_update_stages");
-    double stage_sum = 0;
-    std::vector<std::pair<std::string, double>> medians;
-    for (const auto& [name, unused] : indrive::agent::StepTiming{}.as_metrics()) {
-      if (name == "time/update_s") continue;
+    // Median of each stage over the measured updates, its share of their sum, its product
+    // FLOPs and GFLOP/s.
+    const auto stage_median = [](const std::vector<indrive::agent::StepTiming>& runs,
+                                 const std::string& name) {
       std::vector<double> v;
-      for (const auto& s : stages) {
+      for (const auto& s : runs) {
         for (const auto& [n, x] : s.as_metrics())
           if (n == name) v.push_back(x);
       }
-      medians.emplace_back(name.substr(5, name.size() - 7), median(v));
-      stage_sum += medians.back().second;
+      return median(v);
+    };
+    double stage_sum = 0, flops_sum = 0;
+    std::vector<std::tuple<std::string, double, double>> medians;
+    for (const auto& [name, unused] : indrive::agent::StepTiming{}.as_metrics()) {
+      if (name == "time/update_s") continue;
+      medians.emplace_back(name.substr(5, name.size() - 7), stage_median(stages, name),
+                           stage_median(stage_flops, name));
+      stage_sum += std::get<1>(medians.back());
+      flops_sum += std::get<2>(medians.back());
     }
-    for (const auto& [name, sec] : medians)
+    std::printf("agent_update_stages");
+    for (const auto& [name, sec, unused] : medians)
       std::printf(" %s=%.3f(%.0f%%)", name.c_str(), sec, stage_sum > 0 ? 100 * sec / stage_sum : 0);
     std::printf("\n");
+    std::printf("agent_update_gflop");
+    for (const auto& [name, sec, flops] : medians)
+      std::printf(" %s=%.2f@%.0f/s", name.c_str(), flops / 1e9, sec > 0 ? flops / sec / 1e9 : 0);
+    std::printf("\n");
+    const double rate = flops_sum / full / 1e9;
+    std::printf(
+        "agent_update_total gflop=%.1f gflops=%.0f of_fp32_peak=%.0f%% of_bf16_peak=%.0f%%\n",
+        flops_sum / 1e9, rate, 100 * rate / peak_fp32, peak_bf16 > 0 ? 100 * rate / peak_bf16 : 0);
+    if (!torch.empty()) {
+      const double ref = torch_reference(torch, preset, threads, std::max(2, std::min(iters, 3)));
+      if (ref > 0)
+        std::printf("torch_ratio torch_sec=%.3f ours_sec=%.3f speedup=%.1fx\n", ref, full,
+                    ref / full);
+    }
     std::printf("arena_mb=%.0f arena_system_allocations=%zu\n",
                 nn::current_graph().arena_capacity_bytes() / 1e6,
                 nn::current_graph().arena_system_allocations());

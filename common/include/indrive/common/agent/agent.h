@@ -76,6 +76,9 @@ class Agent {
   std::int64_t train_steps() const { return train_steps_; }
   // Stage timing of the last train_step.
   const StepTiming& last_timing() const { return timing_; }
+  // The matrix-product FLOPs of each stage of the last update (nn::gemm_flops; the same
+  // fields as last_timing, in FLOPs): what the benchmark divides by the seconds.
+  const StepTiming& last_flops() const { return flops_; }
 
   // Parameters actors need (world model and the acting actor), as a serialized blob.
   std::vector<std::uint8_t> snapshot() const;
@@ -118,6 +121,7 @@ class Agent {
   std::int64_t train_steps_ = 0;
   bool task_actor_initialised_ = false;
   StepTiming timing_;
+  StepTiming flops_;
 };
 
 }  // namespace indrive::agent

@@ -139,6 +139,10 @@ struct AgentConfig {
   // Evaluation samples from the actor, as DreamerV3 evaluates (its policy in eval mode samples
   // the task actor); false takes the most likely action.
   bool eval_sample = true;
+  // Operands of the matrix products: "auto" (bf16 where the CPU multiplies it natively, AMX or
+  // AVX512_BF16; else fp32), "fp32" or "bf16". Parameters, optimiser state and every other op
+  // stay fp32 (nn/kernels.h). Process-wide: an Agent applies it when it is made.
+  std::string precision = "auto";
   std::uint64_t seed = 0;
 };
 

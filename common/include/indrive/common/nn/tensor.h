@@ -69,6 +69,9 @@ struct AlignedAllocator {
 using AlignedFloats = std::vector<float, AlignedAllocator<float>>;
 
 struct Node;
+// A value no parameter version has had in this process (versions are unique, so that a kept
+// copy of a destroyed parameter never matches one made later at the same address).
+std::uint64_t next_parameter_version();
 // Reverse-mode rule of one op: reads node.grad and adds into the grads of node.in[...].
 using BackwardFn = void (*)(Node& node);
 
@@ -88,6 +91,9 @@ struct Node {
   std::int64_t view_offset = 0;
   float fparam[4] = {0, 0, 0, 0};
   std::int64_t iparam[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  // A parameter leaf's value version, bumped whenever its values are handed out for writing;
+  // the kernel layer keeps a bf16 copy per version (kernels.h).
+  std::uint64_t version = 0;
 };
 
 }  // namespace detail
@@ -253,8 +259,14 @@ class Parameter {
   const Shape& shape() const { return node_.shape; }
   // Number of elements.
   std::int64_t numel() const { return node_.shape.numel(); }
-  // The values (numel() floats, row-major).
-  std::span<float> value() { return value_; }
+  // The values (numel() floats, row-major). The writable view counts as a write: it bumps the
+  // version that the kernel layer's bf16 and blocked copies of the parameter are checked
+  // against. Writes through a view taken earlier are seen by products from the next
+  // Graph::reset() on (the copies also end with each graph).
+  std::span<float> value() {
+    node_.version = detail::next_parameter_version();
+    return value_;
+  }
   std::span<const float> value() const { return value_; }
   // The accumulated gradient (numel() floats).
   std::span<float> grad() { return grad_; }
