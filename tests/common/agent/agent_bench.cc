@@ -134,6 +134,7 @@ double torch_reference(const std::string& script, const std::string& preset, int
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // figures survive a run cut short
   std::string preset = "tiny", method = "disag", precision = "auto", kernels = "onednn", torch;
   std::vector<std::string> sets;
   int threads = 2, iters = 5;
