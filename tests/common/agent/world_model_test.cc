@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "dot_env.h"
+#include "dot_learning.h"
 
 namespace indrive::agent {
 namespace {
@@ -83,24 +84,12 @@ TEST(WorldModel, LearnsTheDotEnvironmentAndImaginesItOpenLoop) {
   // imagined frames (true actions, prior only) have less than 0.6 times the error of repeating the
   // last observed frame. Seeds fixed; about 25 s on one core.
   nn::set_threads(1);
-  nn::Rng rng(3);
-  WorldModelConfig config = tiny_model();
-  WorldModel wm(config, rng);
-  nn::Adam adam(wm.params(), {.lr = 1e-3f, .eps = 1e-8f, .clip = 1000.0f});
-  ReplayBuffer replay = dot_replay(3000);
-  // KL is tracked in windows of 50 updates: it rises while the posterior starts to carry the
-  // dot's position, then falls as the prior learns to predict it.
-  const int updates = 700, window = 50;
-  std::vector<float> recon(updates / window, 0.0f), kl(updates / window, 0.0f);
-  for (int i = 0; i < updates; ++i) {
-    const SequenceBatch batch = replay.sample(8, 8);
-    nn::current_graph().reset();
-    WorldModelOutput out = wm.observe(batch, false, rng);
-    nn::current_graph().backward(out.loss);
-    adam.step();
-    recon[i / window] += out.recon / window;
-    kl[i / window] += out.kl / window;
-  }
+  dot_learning::TrainedWorldModel trained;
+  const std::vector<float>& recon = trained.recon;
+  const std::vector<float>& kl = trained.kl;
+  WorldModel& wm = trained.wm;
+  ReplayBuffer& replay = trained.replay;
+  nn::Rng& rng = trained.rng;
   const float peak_kl = *std::max_element(kl.begin(), kl.end());
   std::printf("recon %.2f -> %.2f, kl %.2f, peak %.2f -> %.2f\n", recon.front(), recon.back(),
               kl.front(), peak_kl, kl.back());
