@@ -56,7 +56,6 @@ inline ConstMatrixMap cmat(const float* p, std::int64_t rows, std::int64_t cols)
 inline GemmOperand operand(const ConstMatrixMap& m) {
   return {m.data(), m.rows(), m.cols(), false};
 }
-inline GemmOperand operand(const MatrixMap& m) { return {m.data(), m.rows(), m.cols(), false}; }
 template <typename Map>
 GemmOperand operand(const Eigen::Transpose<Map>& t) {
   const auto& m = t.nestedExpression();

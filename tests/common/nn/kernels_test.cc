@@ -128,6 +128,18 @@ TEST_F(KernelsTest, AKeptBf16CopyOfAParameterFollowsEveryWrite) {
   for (float& v : w.value()) v = -v;
   const auto y2 = run();
   for (std::size_t i = 0; i < y1.size(); ++i) ASSERT_EQ(y2[i], -y1[i]) << i;
+  // Within one graph (no reset between), a write through value() is seen by the next product:
+  // only the parameter's version tells.
+  current_graph().reset();
+  const Tensor x = constant({64, 256}, x_values);
+  const Tensor before = matmul(x, w.tensor());
+  for (float& v : w.value()) v = -v;  // back to the first values
+  const Tensor after = matmul(x, w.tensor());
+  for (std::int64_t i = 0; i < before.numel(); ++i) {
+    ASSERT_EQ(before.data()[i], y2[static_cast<std::size_t>(i)]) << i;
+    ASSERT_EQ(after.data()[i], y1[static_cast<std::size_t>(i)]) << i;
+  }
+  for (float& v : w.value()) v = -v;
   // A write through a span taken before the last product (as gradient checks write) is seen
   // from the next graph on.
   const std::span<float> held = w.value();
