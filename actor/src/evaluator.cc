@@ -142,8 +142,7 @@ struct Evaluator::Impl {
       inbox =
           std::make_unique<SnapshotInbox>(service.run_id(), architecture_descriptor(agent_config),
                                           c.get<double>("actor.request_after_s"));
-      participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
-          .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
+      participant = std::make_unique<dds::Participant>(service.participant_options());
       result_writer = participant->make_writer<msg::EpisodeResult>();
       request_writer = participant->make_writer<msg::SnapshotRequest>();
       policy_reader = participant->make_reader<msg::PolicySnapshot>(

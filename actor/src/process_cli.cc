@@ -11,6 +11,14 @@ std::atomic<bool> g_stop{false};
 
 void on_stop_signal(int) { g_stop.store(true); }
 
+// ", discovery server HOST:PORT ..." when one is set by flag, key or environment, resolved
+// here so that --check-config shows a name that does not resolve.
+std::string discovery_summary(const ServiceConfig& config) {
+  const auto server =
+      dds::resolve_discovery_server(config.config().get<std::string>("dds.discovery_server"));
+  return server ? ", discovery server " + server->describe() : "";
+}
+
 }  // namespace
 
 void add_service_options(CLI::App& app, ServiceOptions& options, std::string& log_level) {
@@ -20,6 +28,9 @@ void add_service_options(CLI::App& app, ServiceOptions& options, std::string& lo
   app.add_option("--domain", options.domain_id, "DDS domain id")->check(CLI::Range(0, 232));
   app.add_option("--dds-profile", options.dds_profile, "Fast DDS XML profiles file")
       ->check(CLI::ExistingFile);
+  app.add_option("--discovery-server", options.discovery_server,
+                 "HOST:PORT of the DDS discovery server (with the discovery_server.xml profile); "
+                 "default: $INDRIVE_DISCOVERY_SERVER, then the profile's address");
   app.add_option("--set", options.overrides, "config override key=value (repeatable)");
   app.add_option("--log-level", log_level, "debug, info, warn, error or off")
       ->capture_default_str();
@@ -32,7 +43,7 @@ std::string check_summary(const ServiceConfig& config) {
   return "config ok: run '" + config.run_id() + "', preset " + agent.preset + ", phase " +
          std::string(agent::to_string(agent.phase)) + ", domain " +
          std::to_string(config.domain_id()) + ", DDS profiles " +
-         dds::resolve_profiles_file(config.dds_profile()).string();
+         dds::resolve_profiles_file(config.dds_profile()).string() + discovery_summary(config);
 }
 
 const std::atomic<bool>& install_stop_signals() {

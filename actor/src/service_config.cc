@@ -174,6 +174,9 @@ ServiceConfig ServiceConfig::resolve(const ServiceOptions& options) {
     service.config_.set("dds.profiles_file", options.dds_profile, "--dds-profile");
   }
   service.dds_profile_ = service.config_.get<std::string>("dds.profiles_file");
+  if (!options.discovery_server.empty()) {
+    service.config_.set("dds.discovery_server", options.discovery_server, "--discovery-server");
+  }
   if (service.dds_profile_.empty() && std::getenv(dds::kProfilesEnvVar) == nullptr) {
     // Neither flag, config nor environment names one: use the shipped single-host profile,
     // found under the data roots (installed tree or source tree, see data_path.h).
@@ -181,6 +184,13 @@ ServiceConfig ServiceConfig::resolve(const ServiceOptions& options) {
   }
   agent::validate(service.agent());
   return service;
+}
+
+dds::ParticipantOptions ServiceConfig::participant_options() const {
+  dds::ParticipantOptions options = dds::participant_options(config_);
+  options.domain_id = domain_id_;
+  options.profiles_file = dds_profile_;
+  return options;
 }
 
 agent::AgentConfig ServiceConfig::agent() const {

@@ -286,8 +286,7 @@ struct Learner::Impl {
     // Actors may always run until replay holds the prefill again; a restored replay needs none.
     fill_floor = stats.counters.env_steps + std::max<std::int64_t>(0, fill_target - replay.size());
 
-    participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
-        .domain_id = service.domain_id(), .profiles_file = service.dds_profile()});
+    participant = std::make_unique<dds::Participant>(service.participant_options());
     policy_writer = participant->make_writer<msg::PolicySnapshot>();
     announce_writer = participant->make_writer<msg::SnapshotAnnounce>();
     allowance_writer = participant->make_writer<msg::StepAllowance>();

@@ -1,8 +1,15 @@
 #include "indrive/common/dds.h"
 
+#include <arpa/inet.h>
+#include <fastdds/rtps/common/Locator.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
+#include <fastrtps/utils/IPLocator.h>
+#include <netdb.h>
+
 #include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/log/Log.hpp>
+#include <string_view>
 #include <thread>
 
 #include "indrive/common/check.h"
@@ -19,6 +26,22 @@ class SinkConsumer : public eprosima::fastdds::dds::LogConsumer {
  public:
   void Consume(const eprosima::fastdds::dds::Log::Entry& entry) override {
     using Kind = eprosima::fastdds::dds::Log::Kind;
+    if (is_foreign_fragment_warning(entry)) {
+      // A snapshot writer with several matched readers sends its fragments once per receiving
+      // port with no reader named, so every reader of that participant looks at them. The
+      // policy reader takes them; a best-effort reader of another topic (the heartbeat reader)
+      // finds no such writer among its own and warns, once per fragment: about 4,000 lines in
+      // two minutes of a two-host run, for data that did arrive. Reliable readers stay silent
+      // in the same case, and shared memory (single_host.xml) sends a snapshot unfragmented.
+      if (foreign_fragments_.fetch_add(1) == 0) {
+        log::write(log::Level::kInfo, "fastdds",
+                   "[RTPS_MSG_IN] fragments of a sample meant for another reader of this "
+                   "participant reach the heartbeat reader too; Fast DDS's 'received DATA_FRAG "
+                   "from unknown writer' warning for them is not shown (harmless)",
+                   __FILE__, __LINE__);
+      }
+      return;
+    }
     const log::Level level = entry.kind == Kind::Error     ? log::Level::kError
                              : entry.kind == Kind::Warning ? log::Level::kWarn
                                                            : log::Level::kDebug;
@@ -28,6 +51,15 @@ class SinkConsumer : public eprosima::fastdds::dds::LogConsumer {
                entry.context.filename != nullptr ? entry.context.filename : "fastdds",
                entry.context.line);
   }
+
+ private:
+  static bool is_foreign_fragment_warning(const eprosima::fastdds::dds::Log::Entry& entry) {
+    return entry.kind == eprosima::fastdds::dds::Log::Kind::Warning &&
+           entry.context.category != nullptr &&
+           std::string_view(entry.context.category) == "RTPS_MSG_IN" &&
+           entry.message.find("received DATA_FRAG from unknown writer") != std::string::npos;
+  }
+  std::atomic<std::uint64_t> foreign_fragments_{0};
 };
 
 std::filesystem::path canonical_or_same(const std::filesystem::path& path) {
@@ -63,7 +95,91 @@ void claim_profiles_file(const std::filesystem::path& path, bool commit) {
   }
 }
 
+// Points every discovery server of a client profile at `address`. The profile keeps the
+// servers' GUID prefixes (which `fastdds discovery -i N` fixes); only their locators change.
+void apply_discovery_server(eprosima::fastdds::dds::DomainParticipantQos& qos,
+                            const ServerAddress& address,
+                            const std::filesystem::path& profiles_file) {
+  const std::string& source = address.source;
+  using eprosima::fastrtps::rtps::DiscoveryProtocol_t;
+  auto& discovery = qos.wire_protocol().builtin.discovery_config;
+  if (discovery.discoveryProtocol != DiscoveryProtocol_t::CLIENT &&
+      discovery.discoveryProtocol != DiscoveryProtocol_t::SUPER_CLIENT) {
+    throw DdsError(source + " names a discovery server, but the DDS profiles file '" +
+                   profiles_file.string() +
+                   "' does not make discovery-server clients (it discovers peers by "
+                   "multicast); use deploy/dds/discovery_server.xml, or unset " +
+                   source);
+  }
+  if (discovery.m_DiscoveryServers.empty()) {
+    throw DdsError("the DDS profiles file '" + profiles_file.string() +
+                   "' lists no <RemoteServer> whose address " + source + " could replace");
+  }
+  eprosima::fastrtps::rtps::Locator_t locator;
+  locator.kind = LOCATOR_KIND_UDPv4;
+  eprosima::fastrtps::rtps::IPLocator::setIPv4(locator, address.ipv4);
+  locator.port = static_cast<std::uint32_t>(address.port);
+  for (auto& server : discovery.m_DiscoveryServers) {
+    server.metatrafficUnicastLocatorList.clear();
+    server.metatrafficUnicastLocatorList.push_back(locator);
+  }
+}
+
 }  // namespace
+
+ServerAddress parse_discovery_server(const std::string& text, const std::string& source) {
+  ServerAddress address;
+  address.host = text;
+  address.source = source;
+  const auto colon = text.rfind(':');
+  if (colon != std::string::npos) {
+    address.host = text.substr(0, colon);
+    const std::string port = text.substr(colon + 1);
+    const bool digits = !port.empty() && port.size() <= 5 &&
+                        port.find_first_not_of("0123456789") == std::string::npos;
+    address.port = digits ? std::stoi(port) : 0;
+    if (address.port < 1 || address.port > 65535) {
+      throw DdsError(source + " is '" + text +
+                     "': the port after ':' must be 1..65535 (HOST:PORT, e.g. 10.0.0.1:" +
+                     std::to_string(kDefaultDiscoveryPort) + ")");
+    }
+  }
+  if (address.host.empty()) {
+    throw DdsError(source + " is '" + text +
+                   "': give the server as HOST:PORT or HOST, e.g. 10.0.0.1:" +
+                   std::to_string(kDefaultDiscoveryPort));
+  }
+  addrinfo hints{};
+  hints.ai_family = AF_INET;  // the shipped profiles carry data over UDPv4
+  hints.ai_socktype = SOCK_DGRAM;
+  addrinfo* found = nullptr;
+  const int status = ::getaddrinfo(address.host.c_str(), nullptr, &hints, &found);
+  if (status != 0 || found == nullptr) {
+    throw DdsError(source + " is '" + text + "': cannot resolve '" + address.host +
+                   "' to an IPv4 address (" + ::gai_strerror(status) +
+                   "); check the name, or give the server's address");
+  }
+  char buffer[INET_ADDRSTRLEN] = {};
+  ::inet_ntop(AF_INET, &reinterpret_cast<const sockaddr_in*>(found->ai_addr)->sin_addr, buffer,
+              sizeof buffer);
+  ::freeaddrinfo(found);
+  address.ipv4 = buffer;
+  return address;
+}
+
+std::string ServerAddress::describe() const {
+  return host + ":" + std::to_string(port) + (host != ipv4 ? " (" + ipv4 + ")" : "") + " from " +
+         source;
+}
+
+std::optional<ServerAddress> resolve_discovery_server(const std::string& configured) {
+  if (!configured.empty()) {
+    return parse_discovery_server(configured, "--discovery-server (dds.discovery_server)");
+  }
+  const char* from_env = std::getenv(kDiscoveryServerEnvVar);
+  if (from_env == nullptr || *from_env == '\0') return std::nullopt;
+  return parse_discovery_server(from_env, std::string("$") + kDiscoveryServerEnvVar);
+}
 
 void route_fastdds_log() {
   static std::once_flag once;
@@ -80,13 +196,17 @@ void declare_config(config::Schema& schema) {
       .add_string("dds.profiles_file", "",
                   "XML profiles file (deploy/dds/*.xml); empty: FASTRTPS_DEFAULT_PROFILES_FILE")
       .add_string("dds.participant_profile", "indrive_participant",
-                  "<participant> profile in the XML profiles file");
+                  "<participant> profile in the XML profiles file")
+      .add_string("dds.discovery_server", "",
+                  "HOST:PORT of the discovery server (discovery_server.xml profile); empty: "
+                  "$INDRIVE_DISCOVERY_SERVER, then the profile's address");
 }
 
 ParticipantOptions participant_options(const config::Config& config) {
   return {.domain_id = config.get<int>("dds.domain_id"),
           .profiles_file = config.get<std::string>("dds.profiles_file"),
-          .participant_profile = config.get<std::string>("dds.participant_profile")};
+          .participant_profile = config.get<std::string>("dds.participant_profile"),
+          .discovery_server = config.get<std::string>("dds.discovery_server")};
 }
 
 std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
@@ -132,6 +252,16 @@ Participant::Participant(const ParticipantOptions& options)
       ReturnCode_t::RETCODE_OK) {
     throw DdsError("DDS profiles file '" + profiles_file_.string() +
                    "' has no <participant> profile named '" + options.participant_profile + "'");
+  }
+  if (const auto server = resolve_discovery_server(options.discovery_server)) {
+    apply_discovery_server(qos, *server, profiles_file_);
+    INDRIVE_LOG(kInfo, "dds") << "discovery server " << server->describe();
+  }
+  uses_shared_memory_ = qos.transport().use_builtin_transports;
+  for (const auto& transport : qos.transport().user_transports) {
+    uses_shared_memory_ |=
+        dynamic_cast<const eprosima::fastdds::rtps::SharedMemTransportDescriptor*>(
+            transport.get()) != nullptr;
   }
   participant_ = factory->create_participant(domain_id_, qos);
   if (participant_ == nullptr) {

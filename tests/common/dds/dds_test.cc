@@ -168,5 +168,58 @@ TEST(DdsParticipant, HeartbeatsKeepOneSamplePerKey) {
   EXPECT_EQ((latest[{msg::ROLE_ACTOR, 2u}]), 10u);
 }
 
+TEST(DdsDiscoveryServer, AddressesParseWithTheDefaultPortAndResolve) {
+  const ServerAddress numeric = parse_discovery_server("10.1.2.3:12000", "--discovery-server");
+  EXPECT_EQ(numeric.host, "10.1.2.3");
+  EXPECT_EQ(numeric.ipv4, "10.1.2.3");
+  EXPECT_EQ(numeric.port, 12000);
+  const ServerAddress named = parse_discovery_server("localhost", "--discovery-server");
+  EXPECT_EQ(named.ipv4, "127.0.0.1");
+  EXPECT_EQ(named.port, kDefaultDiscoveryPort);
+  EXPECT_EQ(named.describe(), "localhost:11811 (127.0.0.1) from --discovery-server");
+}
+
+TEST(DdsDiscoveryServer, BadAddressesSayWhatIsWrongAndWhereTheyCameFrom) {
+  const auto message = [](const std::string& text) {
+    return error_of([&] { parse_discovery_server(text, "$INDRIVE_DISCOVERY_SERVER"); });
+  };
+  for (const std::string text : {"10.0.0.1:", "10.0.0.1:0", "10.0.0.1:70000", "host:port"}) {
+    const std::string error = message(text);
+    EXPECT_NE(error.find("$INDRIVE_DISCOVERY_SERVER is '" + text + "'"), std::string::npos)
+        << error;
+    EXPECT_NE(error.find("port after ':' must be 1..65535"), std::string::npos) << error;
+  }
+  EXPECT_NE(message(":11811").find("give the server as HOST:PORT"), std::string::npos);
+  const std::string unresolved = message("no-such-host.invalid:11811");
+  EXPECT_NE(unresolved.find("cannot resolve 'no-such-host.invalid'"), std::string::npos)
+      << unresolved;
+}
+
+TEST(DdsDiscoveryServer, TheFlagWinsOverTheEnvironmentWhichWinsOverNothing) {
+  ::unsetenv(kDiscoveryServerEnvVar);
+  EXPECT_FALSE(resolve_discovery_server("").has_value());
+  ::setenv(kDiscoveryServerEnvVar, "127.0.0.1:15000", 1);
+  const auto from_env = resolve_discovery_server("");
+  ASSERT_TRUE(from_env.has_value());
+  EXPECT_EQ(from_env->port, 15000);
+  EXPECT_EQ(from_env->source, "$INDRIVE_DISCOVERY_SERVER");
+  const auto from_flag = resolve_discovery_server("127.0.0.1:16000");
+  ASSERT_TRUE(from_flag.has_value());
+  EXPECT_EQ(from_flag->port, 16000);
+  ::unsetenv(kDiscoveryServerEnvVar);
+}
+
+// default.xml discovers by multicast: a server address there would be silently ignored by
+// Fast DDS, so it is refused with the profile to use instead.
+TEST(DdsDiscoveryServer, AServerWithAMulticastProfileIsRefused) {
+  const auto message = error_of([] {
+    Participant participant({.domain_id = testing::unique_domain_id(),
+                             .profiles_file = profiles(),
+                             .discovery_server = "127.0.0.1:11811"});
+  });
+  EXPECT_NE(message.find("does not make discovery-server clients"), std::string::npos) << message;
+  EXPECT_NE(message.find("deploy/dds/discovery_server.xml"), std::string::npos) << message;
+}
+
 }  // namespace
 }  // namespace indrive::dds

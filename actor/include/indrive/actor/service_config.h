@@ -18,6 +18,7 @@
 
 #include "indrive/common/agent/config.h"
 #include "indrive/common/config.h"
+#include "indrive/common/dds.h"
 #include "indrive/envserver/env.h"
 #include "indrive/msg/trajectory.h"
 
@@ -29,6 +30,7 @@ struct ServiceOptions {
   std::filesystem::path run_dir;       // --run-dir; its last component is the run id
   int domain_id = -1;                  // --domain; -1: the config's dds.domain_id
   std::string dds_profile;             // --dds-profile; empty: config, env var, then built-in
+  std::string discovery_server;        // --discovery-server HOST:PORT; empty: config, env var
   std::vector<std::string> overrides;  // --set key=value, in order
   bool check_only = false;             // --check-config: resolve, summarise and exit
 };
@@ -55,6 +57,9 @@ class ServiceConfig {
   int domain_id() const { return domain_id_; }
   // The XML profiles file to load (never empty: falls back to the shipped single-host one).
   const std::string& dds_profile() const { return dds_profile_; }
+  // What a participant of this run is made from: domain, profiles file and the dds.* keys
+  // (discovery server, ...).
+  dds::ParticipantOptions participant_options() const;
 
   // The agent's configuration (preset sizes plus every agent.* key).
   agent::AgentConfig agent() const;

@@ -31,6 +31,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -53,13 +54,43 @@ class DdsError : public std::runtime_error {
 // Name of the environment variable Fast DDS reads its default XML profiles file from.
 inline constexpr const char* kProfilesEnvVar = "FASTRTPS_DEFAULT_PROFILES_FILE";
 
+// Name of the environment variable that gives the discovery server's HOST:PORT when neither
+// the --discovery-server flag nor the dds.discovery_server key does.
+inline constexpr const char* kDiscoveryServerEnvVar = "INDRIVE_DISCOVERY_SERVER";
+
+// Port of a discovery server when HOST is given without one (Fast DDS's default).
+inline constexpr int kDefaultDiscoveryPort = 11811;
+
 struct ParticipantOptions {
   int domain_id = 0;
   // XML profiles file; empty means the file named by FASTRTPS_DEFAULT_PROFILES_FILE.
   std::string profiles_file{};
   // <participant> profile in that file.
   std::string participant_profile = "indrive_participant";
+  // HOST:PORT (or HOST) of the discovery server, replacing the address the profile names;
+  // the profile must be a discovery-server client (deploy/dds/discovery_server.xml). Empty:
+  // $INDRIVE_DISCOVERY_SERVER, and when that is unset too, the profile's own address.
+  std::string discovery_server{};
 };
+
+// A discovery server's address: `host` as given, `ipv4` the address it resolved to, and
+// where it was given (the flag or the environment variable).
+struct ServerAddress {
+  std::string host;
+  std::string ipv4;
+  int port = kDefaultDiscoveryPort;
+  std::string source;
+  // "HOST:PORT", with " (IP)" when HOST is a name, and " from SOURCE".
+  std::string describe() const;
+};
+
+// Parses "HOST:PORT" or "HOST" and resolves HOST (a name or a dotted IPv4 address) to IPv4;
+// throws DdsError naming `source` (the flag or variable it came from) when it cannot.
+ServerAddress parse_discovery_server(const std::string& text, const std::string& source);
+
+// The discovery server a participant uses: `configured` (ParticipantOptions::discovery_server)
+// if not empty, else $INDRIVE_DISCOVERY_SERVER; nullopt when neither names one.
+std::optional<ServerAddress> resolve_discovery_server(const std::string& configured);
 
 // Declares the dds.* configuration keys (domain_id, profiles_file, participant_profile).
 void declare_config(config::Schema& schema);
@@ -235,6 +266,9 @@ class Participant {
   // The profiles file this participant was configured from.
   const std::filesystem::path& profiles_file() const { return profiles_file_; }
   int domain_id() const { return domain_id_; }
+  // Whether the profile gives this participant a shared-memory transport (explicitly or through
+  // Fast DDS's builtin transports).
+  bool uses_shared_memory() const { return uses_shared_memory_; }
   // The underlying Fast DDS participant, for what this wrapper does not cover.
   eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
 
@@ -254,6 +288,7 @@ class Participant {
 
   std::filesystem::path profiles_file_;
   int domain_id_ = 0;
+  bool uses_shared_memory_ = false;
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
   eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
