@@ -138,8 +138,7 @@ struct TrainingActor::Impl {
   // inbox, allowance gate) lives outside them, so a new participant carries on where the old one
   // stopped.
   void connect() {
-    participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
-        .domain_id = config.domain_id(), .profiles_file = config.dds_profile()});
+    participant = std::make_unique<dds::Participant>(config.participant_options());
     chunk_writer = participant->make_writer<msg::TrajectoryChunk>();
     result_writer = participant->make_writer<msg::EpisodeResult>();
     heartbeat_writer = participant->make_writer<msg::Heartbeat>();
@@ -176,9 +175,12 @@ struct TrainingActor::Impl {
   // process that touches them, and once (in CI, under load) an actor restarted after such a kill
   // never heard the learner within 60 s; the cause was not reproduced in about 50 local runs. A
   // learner that is merely gone is found again the same way when it returns. Called only where this
-  // actor waits for the learner.
+  // actor waits for the learner. Only a participant with shared memory does it: over UDP the
+  // remedy is not needed, and it hurts across hosts, where silence means a cut link: a participant
+  // made while the link is down found no learner when the link came back (the next one, 20 s
+  // later, did; tests/learner/two_host_test.cc) and the chunks the old one still held were lost.
   void maybe_rejoin() {
-    if (rejoin_after_s <= 0.0) return;
+    if (rejoin_after_s <= 0.0 || !participant->uses_shared_memory()) return;
     if (gate.silent_s() < rejoin_after_s || seconds_since(connected_at) < rejoin_after_s) return;
     ++stats.rejoins;
     INDRIVE_LOG(kWarn, "actor") << "actor " << id << " heard nothing of the learner of run '"
