@@ -7,6 +7,7 @@
 
 #include "indrive/common/check.h"
 #include "indrive/common/config.h"
+#include "indrive/common/dds_security.h"
 
 namespace indrive::dds {
 namespace {
@@ -80,13 +81,19 @@ void declare_config(config::Schema& schema) {
       .add_string("dds.profiles_file", "",
                   "XML profiles file (deploy/dds/*.xml); empty: FASTRTPS_DEFAULT_PROFILES_FILE")
       .add_string("dds.participant_profile", "indrive_participant",
-                  "<participant> profile in the XML profiles file");
+                  "<participant> profile in the XML profiles file")
+      .add_string("dds.security_dir", "",
+                  "folder made by deploy/dds/make_security.sh; empty: no DDS Security")
+      .add_choice("dds.security_role", "", {"", "learner", "actor", "evaluator", "observer"},
+                  "DDS Security role (certificate and permissions); empty: the program's own");
 }
 
 ParticipantOptions participant_options(const config::Config& config) {
   return {.domain_id = config.get<int>("dds.domain_id"),
           .profiles_file = config.get<std::string>("dds.profiles_file"),
-          .participant_profile = config.get<std::string>("dds.participant_profile")};
+          .participant_profile = config.get<std::string>("dds.participant_profile"),
+          .security_dir = config.get<std::string>("dds.security_dir"),
+          .security_role = config.get<std::string>("dds.security_role")};
 }
 
 std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
@@ -133,11 +140,18 @@ Participant::Participant(const ParticipantOptions& options)
     throw DdsError("DDS profiles file '" + profiles_file_.string() +
                    "' has no <participant> profile named '" + options.participant_profile + "'");
   }
+  if (!options.security_dir.empty()) {
+    apply_security(qos, options.security_dir, options.security_role);
+  }
   participant_ = factory->create_participant(domain_id_, qos);
   if (participant_ == nullptr) {
     throw DdsError("could not create a DDS participant in domain " + std::to_string(domain_id_) +
                    " with profile '" + options.participant_profile + "' of '" +
-                   profiles_file_.string() + "' (transport setup failed; see the log)");
+                   profiles_file_.string() + "' (transport setup failed" +
+                   (security_enabled(qos) ? ", or DDS Security refused the governance or the "
+                                            "permissions for this domain"
+                                          : "") +
+                   "; see the log)");
   }
   publisher_ = participant_->create_publisher(eprosima::fastdds::dds::PUBLISHER_QOS_DEFAULT);
   subscriber_ = participant_->create_subscriber(eprosima::fastdds::dds::SUBSCRIBER_QOS_DEFAULT);
@@ -190,7 +204,8 @@ eprosima::fastdds::dds::DataWriter* Participant::create_writer(eprosima::fastdds
   auto* writer = publisher_->create_datawriter(topic, qos);
   if (writer == nullptr) {
     throw DdsError("could not create a DDS writer on '" + topic->get_name() + "' with profile '" +
-                   profile + "' (inconsistent QoS in the XML?)");
+                   profile + "' (inconsistent QoS in the XML?" +
+                   permissions_note(participant_->get_qos(), "publish") + ")");
   }
   return writer;
 }
@@ -207,7 +222,8 @@ eprosima::fastdds::dds::DataReader* Participant::create_reader(
   auto* reader = subscriber_->create_datareader(topic, qos, listener);
   if (reader == nullptr) {
     throw DdsError("could not create a DDS reader on '" + topic->get_name() + "' with profile '" +
-                   profile + "' (inconsistent QoS in the XML?)");
+                   profile + "' (inconsistent QoS in the XML?" +
+                   permissions_note(participant_->get_qos(), "subscribe to") + ")");
   }
   return reader;
 }

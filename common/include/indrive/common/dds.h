@@ -59,6 +59,10 @@ struct ParticipantOptions {
   std::string profiles_file{};
   // <participant> profile in that file.
   std::string participant_profile = "indrive_participant";
+  // Folder made by deploy/dds/make_security.sh; empty: no DDS Security (dds_security.h).
+  std::string security_dir{};
+  // Role whose certificate and permissions the participant uses with security_dir.
+  std::string security_role{};
 };
 
 // Declares the dds.* configuration keys (domain_id, profiles_file, participant_profile).
