@@ -20,6 +20,9 @@ void add_service_options(CLI::App& app, ServiceOptions& options, std::string& lo
   app.add_option("--domain", options.domain_id, "DDS domain id")->check(CLI::Range(0, 232));
   app.add_option("--dds-profile", options.dds_profile, "Fast DDS XML profiles file")
       ->check(CLI::ExistingFile);
+  app.add_option("--dds-security", options.dds_security,
+                 "DDS Security folder made by deploy/dds/make_security.sh (default: none)")
+      ->check(CLI::ExistingDirectory);
   app.add_option("--set", options.overrides, "config override key=value (repeatable)");
   app.add_option("--log-level", log_level, "debug, info, warn, error or off")
       ->capture_default_str();

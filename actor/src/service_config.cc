@@ -174,6 +174,9 @@ ServiceConfig ServiceConfig::resolve(const ServiceOptions& options) {
     service.config_.set("dds.profiles_file", options.dds_profile, "--dds-profile");
   }
   service.dds_profile_ = service.config_.get<std::string>("dds.profiles_file");
+  if (!options.dds_security.empty()) {
+    service.config_.set("dds.security_dir", options.dds_security, "--dds-security");
+  }
   if (service.dds_profile_.empty() && std::getenv(dds::kProfilesEnvVar) == nullptr) {
     // Neither flag, config nor environment names one: use the shipped single-host profile,
     // found under the data roots (installed tree or source tree, see data_path.h).

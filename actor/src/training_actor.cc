@@ -11,6 +11,7 @@
 #include "indrive/common/agent/policy.h"
 #include "indrive/common/check.h"
 #include "indrive/common/dds.h"
+#include "indrive/common/dds_security.h"
 #include "indrive/common/log.h"
 #include "indrive/common/nn/nn.h"
 #include "indrive/envserver/coverage.h"
@@ -139,7 +140,10 @@ struct TrainingActor::Impl {
   // stopped.
   void connect() {
     participant = std::make_unique<dds::Participant>(dds::ParticipantOptions{
-        .domain_id = config.domain_id(), .profiles_file = config.dds_profile()});
+        .domain_id = config.domain_id(),
+        .profiles_file = config.dds_profile(),
+        .security_dir = config.config().get<std::string>("dds.security_dir"),
+        .security_role = dds::security_role(config.config(), "actor")});
     chunk_writer = participant->make_writer<msg::TrajectoryChunk>();
     result_writer = participant->make_writer<msg::EpisodeResult>();
     heartbeat_writer = participant->make_writer<msg::Heartbeat>();

@@ -29,6 +29,7 @@ struct ServiceOptions {
   std::filesystem::path run_dir;       // --run-dir; its last component is the run id
   int domain_id = -1;                  // --domain; -1: the config's dds.domain_id
   std::string dds_profile;             // --dds-profile; empty: config, env var, then built-in
+  std::string dds_security;            // --dds-security; empty: config's dds.security_dir
   std::vector<std::string> overrides;  // --set key=value, in order
   bool check_only = false;             // --check-config: resolve, summarise and exit
 };
@@ -43,8 +44,8 @@ const config::Schema& service_schema();
 // A resolved run configuration with typed accessors for what the processes need.
 class ServiceConfig {
  public:
-  // Resolves defaults -> preset -> file -> --set, applies --domain and --dds-profile, and
-  // checks that the agent part is usable. Throws config::ConfigError or
+  // Resolves defaults -> preset -> file -> --set, applies --domain, --dds-profile and
+  // --dds-security, and checks that the agent part is usable. Throws config::ConfigError or
   // agent::AgentConfigError with what is wrong.
   static ServiceConfig resolve(const ServiceOptions& options);
 
