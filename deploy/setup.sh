@@ -25,6 +25,7 @@ packages=(
   sumo
   libeigen3-dev libdnnl-dev libopencv-dev
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libpugixml-dev zlib1g-dev libzstd-dev
+  libssl-dev openssl
   libgtest-dev libgmock-dev
   ffmpeg
 )

@@ -14,6 +14,7 @@
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/common/check.h"
 #include "indrive/common/dds.h"
+#include "indrive/common/dds_security.h"
 #include "indrive/common/episode_csv.h"
 #include "indrive/common/log.h"
 #include "indrive/common/run_dir.h"
@@ -142,7 +143,7 @@ struct Evaluator::Impl {
       inbox =
           std::make_unique<SnapshotInbox>(service.run_id(), architecture_descriptor(agent_config),
                                           c.get<double>("actor.request_after_s"));
-      participant = std::make_unique<dds::Participant>(service.participant_options());
+      participant = std::make_unique<dds::Participant>(service.participant_options("evaluator"));
       result_writer = participant->make_writer<msg::EpisodeResult>();
       request_writer = participant->make_writer<msg::SnapshotRequest>();
       policy_reader = participant->make_reader<msg::PolicySnapshot>(

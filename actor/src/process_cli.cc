@@ -31,6 +31,9 @@ void add_service_options(CLI::App& app, ServiceOptions& options, std::string& lo
   app.add_option("--discovery-server", options.discovery_server,
                  "HOST:PORT of the DDS discovery server (with the discovery_server.xml profile); "
                  "default: $INDRIVE_DISCOVERY_SERVER, then the profile's address");
+  app.add_option("--dds-security", options.dds_security,
+                 "DDS Security folder made by deploy/dds/make_security.sh (default: none)")
+      ->check(CLI::ExistingDirectory);
   app.add_option("--set", options.overrides, "config override key=value (repeatable)");
   app.add_option("--log-level", log_level, "debug, info, warn, error or off")
       ->capture_default_str();

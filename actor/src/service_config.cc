@@ -7,6 +7,7 @@
 
 #include "indrive/common/data_path.h"
 #include "indrive/common/dds.h"
+#include "indrive/common/dds_security.h"
 
 namespace indrive::actor {
 namespace {
@@ -177,6 +178,9 @@ ServiceConfig ServiceConfig::resolve(const ServiceOptions& options) {
   if (!options.discovery_server.empty()) {
     service.config_.set("dds.discovery_server", options.discovery_server, "--discovery-server");
   }
+  if (!options.dds_security.empty()) {
+    service.config_.set("dds.security_dir", options.dds_security, "--dds-security");
+  }
   if (service.dds_profile_.empty() && std::getenv(dds::kProfilesEnvVar) == nullptr) {
     // Neither flag, config nor environment names one: use the shipped single-host profile,
     // found under the data roots (installed tree or source tree, see data_path.h).
@@ -186,10 +190,11 @@ ServiceConfig ServiceConfig::resolve(const ServiceOptions& options) {
   return service;
 }
 
-dds::ParticipantOptions ServiceConfig::participant_options() const {
+dds::ParticipantOptions ServiceConfig::participant_options(const std::string& own_role) const {
   dds::ParticipantOptions options = dds::participant_options(config_);
   options.domain_id = domain_id_;
   options.profiles_file = dds_profile_;
+  options.security_role = dds::security_role(config_, own_role);
   return options;
 }
 

@@ -11,6 +11,7 @@
 #include "indrive/common/agent/policy.h"
 #include "indrive/common/check.h"
 #include "indrive/common/dds.h"
+#include "indrive/common/dds_security.h"
 #include "indrive/common/log.h"
 #include "indrive/common/nn/nn.h"
 #include "indrive/envserver/coverage.h"
@@ -138,7 +139,7 @@ struct TrainingActor::Impl {
   // inbox, allowance gate) lives outside them, so a new participant carries on where the old one
   // stopped.
   void connect() {
-    participant = std::make_unique<dds::Participant>(config.participant_options());
+    participant = std::make_unique<dds::Participant>(config.participant_options("actor"));
     chunk_writer = participant->make_writer<msg::TrajectoryChunk>();
     result_writer = participant->make_writer<msg::EpisodeResult>();
     heartbeat_writer = participant->make_writer<msg::Heartbeat>();

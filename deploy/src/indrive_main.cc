@@ -54,6 +54,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   launch_cmd->add_option("--dds-profile", launch.dds_profile, "Fast DDS XML profiles file")
       ->check(CLI::ExistingFile);
+  launch_cmd
+      ->add_option("--dds-security", launch.dds_security,
+                   "DDS Security folder made by deploy/dds/make_security.sh (default: none)")
+      ->check(CLI::ExistingDirectory);
   launch_cmd->add_option("--set", launch.overrides, "config override key=value (repeatable)");
   launch_cmd
       ->add_option("--status-interval", launch.status_interval_s,

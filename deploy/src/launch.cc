@@ -26,6 +26,10 @@ std::vector<std::string> common_args(const LaunchOptions& options, const fs::pat
   if (!options.dds_profile.empty()) {
     args.insert(args.end(), {"--dds-profile", options.dds_profile.string()});
   }
+  // Every process gets the same folder and picks its own role's files from it.
+  if (!options.dds_security.empty()) {
+    args.insert(args.end(), {"--dds-security", options.dds_security.string()});
+  }
   for (const auto& override_text : options.overrides) {
     args.insert(args.end(), {"--set", override_text});
   }

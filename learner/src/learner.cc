@@ -19,6 +19,7 @@
 #include "indrive/common/check.h"
 #include "indrive/common/checksum.h"
 #include "indrive/common/dds.h"
+#include "indrive/common/dds_security.h"
 #include "indrive/common/log.h"
 #include "indrive/common/nn/kernels.h"
 #include "indrive/common/run_dir.h"
@@ -286,7 +287,7 @@ struct Learner::Impl {
     // Actors may always run until replay holds the prefill again; a restored replay needs none.
     fill_floor = stats.counters.env_steps + std::max<std::int64_t>(0, fill_target - replay.size());
 
-    participant = std::make_unique<dds::Participant>(service.participant_options());
+    participant = std::make_unique<dds::Participant>(service.participant_options("learner"));
     policy_writer = participant->make_writer<msg::PolicySnapshot>();
     announce_writer = participant->make_writer<msg::SnapshotAnnounce>();
     allowance_writer = participant->make_writer<msg::StepAllowance>();

@@ -51,6 +51,18 @@ TEST(ServiceConfigTest, AgentChoicesNameWhatTheConfigurationChose) {
   EXPECT_EQ(defaults.env(small).camera.width, 128);
 }
 
+TEST(ServiceConfigTest, DdsSecurityFlagNamesTheFolder) {
+  testing::TempDir dir;
+  const auto off = ServiceConfig::resolve({.run_dir = dir.path() / "r"});
+  EXPECT_EQ(off.config().get<std::string>("dds.security_dir"), "") << "security is opt-in";
+  const auto on = ServiceConfig::resolve({.run_dir = dir.path() / "r",
+                                          .dds_security = "runs/r/security",
+                                          .overrides = {"dds.security_role=observer"}});
+  EXPECT_EQ(on.config().get<std::string>("dds.security_dir"), "runs/r/security");
+  EXPECT_EQ(on.config().origin("dds.security_dir"), "--dds-security");
+  EXPECT_EQ(on.config().get<std::string>("dds.security_role"), "observer");
+}
+
 TEST(ServiceConfigTest, TaskPhasesSetTheEnvironmentTask) {
   testing::TempDir dir;
   const auto config = ServiceConfig::resolve(

@@ -17,6 +17,7 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
                               .actors = 2,
                               .evaluators = 1,
                               .domain_id = 7,
+                              .dds_security = "/srv/run-security",
                               .overrides = {"train.updates=10"},
                               .bin_dir = "/opt/indrive/bin"};
   const auto plan = launch_plan(options);
@@ -43,6 +44,8 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
     EXPECT_EQ(after("--config"), "smoke.yaml") << spec.name;
     EXPECT_EQ(after("--run-dir"), (dir.path() / "smoke").string()) << spec.name;
     EXPECT_EQ(after("--domain"), "7") << spec.name;
+    // One folder for all: each program picks its own role's files from it.
+    EXPECT_EQ(after("--dds-security"), "/srv/run-security") << spec.name;
     EXPECT_EQ(after("--set"), "train.updates=10") << spec.name;
     EXPECT_EQ(spec.log_file.parent_path(), dir.path() / "smoke" / "logs") << spec.name;
   }

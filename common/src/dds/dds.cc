@@ -14,6 +14,7 @@
 
 #include "indrive/common/check.h"
 #include "indrive/common/config.h"
+#include "indrive/common/dds_security.h"
 
 namespace indrive::dds {
 namespace {
@@ -199,14 +200,20 @@ void declare_config(config::Schema& schema) {
                   "<participant> profile in the XML profiles file")
       .add_string("dds.discovery_server", "",
                   "HOST:PORT of the discovery server (discovery_server.xml profile); empty: "
-                  "$INDRIVE_DISCOVERY_SERVER, then the profile's address");
+                  "$INDRIVE_DISCOVERY_SERVER, then the profile's address")
+      .add_string("dds.security_dir", "",
+                  "folder made by deploy/dds/make_security.sh; empty: no DDS Security")
+      .add_choice("dds.security_role", "", {"", "learner", "actor", "evaluator", "observer"},
+                  "DDS Security role (certificate and permissions); empty: the program's own");
 }
 
 ParticipantOptions participant_options(const config::Config& config) {
   return {.domain_id = config.get<int>("dds.domain_id"),
           .profiles_file = config.get<std::string>("dds.profiles_file"),
           .participant_profile = config.get<std::string>("dds.participant_profile"),
-          .discovery_server = config.get<std::string>("dds.discovery_server")};
+          .discovery_server = config.get<std::string>("dds.discovery_server"),
+          .security_dir = config.get<std::string>("dds.security_dir"),
+          .security_role = config.get<std::string>("dds.security_role")};
 }
 
 std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
@@ -257,6 +264,10 @@ Participant::Participant(const ParticipantOptions& options)
     apply_discovery_server(qos, *server, profiles_file_);
     INDRIVE_LOG(kInfo, "dds") << "discovery server " << server->describe();
   }
+  // After the discovery server: security refuses discovery-server clients (see apply_security).
+  if (!options.security_dir.empty()) {
+    apply_security(qos, options.security_dir, options.security_role);
+  }
   uses_shared_memory_ = qos.transport().use_builtin_transports;
   for (const auto& transport : qos.transport().user_transports) {
     uses_shared_memory_ |=
@@ -267,7 +278,11 @@ Participant::Participant(const ParticipantOptions& options)
   if (participant_ == nullptr) {
     throw DdsError("could not create a DDS participant in domain " + std::to_string(domain_id_) +
                    " with profile '" + options.participant_profile + "' of '" +
-                   profiles_file_.string() + "' (transport setup failed; see the log)");
+                   profiles_file_.string() + "' (transport setup failed" +
+                   (security_enabled(qos) ? ", or DDS Security refused the governance or the "
+                                            "permissions for this domain"
+                                          : "") +
+                   "; see the log)");
   }
   publisher_ = participant_->create_publisher(eprosima::fastdds::dds::PUBLISHER_QOS_DEFAULT);
   subscriber_ = participant_->create_subscriber(eprosima::fastdds::dds::SUBSCRIBER_QOS_DEFAULT);
@@ -320,7 +335,8 @@ eprosima::fastdds::dds::DataWriter* Participant::create_writer(eprosima::fastdds
   auto* writer = publisher_->create_datawriter(topic, qos);
   if (writer == nullptr) {
     throw DdsError("could not create a DDS writer on '" + topic->get_name() + "' with profile '" +
-                   profile + "' (inconsistent QoS in the XML?)");
+                   profile + "' (inconsistent QoS in the XML?" +
+                   permissions_note(participant_->get_qos(), "publish") + ")");
   }
   return writer;
 }
@@ -337,7 +353,8 @@ eprosima::fastdds::dds::DataReader* Participant::create_reader(
   auto* reader = subscriber_->create_datareader(topic, qos, listener);
   if (reader == nullptr) {
     throw DdsError("could not create a DDS reader on '" + topic->get_name() + "' with profile '" +
-                   profile + "' (inconsistent QoS in the XML?)");
+                   profile + "' (inconsistent QoS in the XML?" +
+                   permissions_note(participant_->get_qos(), "subscribe to") + ")");
   }
   return reader;
 }

@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include "indrive/common/dds.h"
+#include "indrive/common/dds_security.h"
 #include "testing.h"
 
 namespace indrive::config {
@@ -206,14 +207,17 @@ TEST(Config, CommandLineFlagsBecomeSources) {
                         "actor",
                         "--dds-profiles",
                         "x.xml",
+                        "--dds-security",
+                        "sec",
                         "--set=a.b=1",
                         "-h"};
-  const CommandLine line =
-      parse_command_line(static_cast<int>(std::size(argv)), argv, {dds::kProfilesFlag});
+  const CommandLine line = parse_command_line(static_cast<int>(std::size(argv)), argv,
+                                              {dds::kProfilesFlag, dds::kSecurityFlag});
   EXPECT_EQ(line.sources.file, "run.yaml");
   EXPECT_EQ(line.sources.preset, "toy");
   EXPECT_EQ(line.sources.overrides,
-            (std::vector<std::string>{"train.batch_size=4", "dds.profiles_file=x.xml", "a.b=1"}));
+            (std::vector<std::string>{"train.batch_size=4", "dds.profiles_file=x.xml",
+                                      "dds.security_dir=sec", "a.b=1"}));
   EXPECT_EQ(line.rest, (std::vector<std::string>{"actor"}));
   EXPECT_TRUE(line.help);
   const char* missing[] = {"learner", "--set"};
@@ -226,6 +230,18 @@ TEST(Config, CommandLineFlagsBecomeSources) {
   EXPECT_EQ(options.domain_id, 9);
   EXPECT_EQ(options.profiles_file, "x.xml");
   EXPECT_EQ(options.participant_profile, "indrive_participant");
+  EXPECT_EQ(options.security_dir, "") << "DDS Security is off unless a folder is named";
+  EXPECT_EQ(options.security_role, "");
+
+  // The security keys: a folder, and a role that must be one of the four or empty (the
+  // program's own role then).
+  const auto secure = Config::resolve(
+      schema, {.overrides = {"dds.security_dir=runs/r1/security", "dds.security_role=observer"}});
+  EXPECT_EQ(dds::participant_options(secure).security_dir, "runs/r1/security");
+  EXPECT_EQ(dds::participant_options(secure).security_role, "observer");
+  EXPECT_EQ(dds::security_role(secure, "learner"), "observer");
+  EXPECT_EQ(dds::security_role(Config::resolve(schema, {}), "learner"), "learner");
+  EXPECT_THROW(Config::resolve(schema, {.overrides = {"dds.security_role=pilot"}}), ConfigError);
 }
 
 TEST(Config, DescribeListsKeysAndPresets) {

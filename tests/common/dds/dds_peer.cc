@@ -8,6 +8,8 @@
 //   dds_peer receive --profiles F --domain D --run-id R --chunks N --result PATH --timeout S
 //     Joins late, checks the snapshot and every chunk against the synthetic generator, counts
 //     drops, and writes its counts to --result once all arrived (exit 0) or at the timeout.
+//   Both take --security DIR --role ROLE to run with DDS Security (a folder of
+//   deploy/dds/make_security.sh and the role whose certificate and permissions to use).
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -30,7 +32,7 @@ using Clock = std::chrono::steady_clock;
 using indrive::dds::DropReason;
 
 struct Args {
-  std::string mode, profiles, run_id, ready, result;
+  std::string mode, profiles, run_id, ready, result, security, role;
   int domain = 0;
   int chunks = 1000;
   int snapshot_mb = 10;
@@ -51,6 +53,10 @@ Args parse_args(int argc, char** argv) {
       args.ready = value;
     else if (flag == "--result")
       args.result = value;
+    else if (flag == "--security")
+      args.security = value;
+    else if (flag == "--role")
+      args.role = value;
     else if (flag == "--domain")
       args.domain = std::stoi(value);
     else if (flag == "--chunks")
@@ -63,6 +69,13 @@ Args parse_args(int argc, char** argv) {
       throw std::invalid_argument("unknown flag " + flag);
   }
   return args;
+}
+
+indrive::dds::ParticipantOptions participant_options(const Args& args) {
+  return {.domain_id = args.domain,
+          .profiles_file = args.profiles,
+          .security_dir = args.security,
+          .security_role = args.role};
 }
 
 double seconds_since(Clock::time_point start) {
@@ -89,7 +102,7 @@ std::vector<indrive::msg::TrajectoryChunk> malformed_chunks(const std::string& r
 }
 
 int publish(const Args& args) {
-  indrive::dds::Participant participant({.domain_id = args.domain, .profiles_file = args.profiles});
+  indrive::dds::Participant participant(participant_options(args));
   auto policy_writer = participant.make_writer<indrive::msg::PolicySnapshot>();
   auto chunk_writer = participant.make_writer<indrive::msg::TrajectoryChunk>();
 
@@ -154,7 +167,7 @@ int receive(const Args& args) {
   int duplicates = 0, mismatches = 0, snapshot_ok = 0, snapshot_bad = 0;
   double snapshot_s = -1.0, first_chunk_s = -1.0, last_chunk_s = -1.0;
 
-  indrive::dds::Participant participant({.domain_id = args.domain, .profiles_file = args.profiles});
+  indrive::dds::Participant participant(participant_options(args));
   const double participant_s = seconds_since(start);
   auto policy_reader = participant.make_reader<indrive::msg::PolicySnapshot>(
       [&](const indrive::msg::PolicySnapshot& snapshot) {

@@ -1,7 +1,8 @@
 // Two real processes on this host exchange a 10 MB PolicySnapshot and 1,000 TrajectoryChunks
 // of 64 frames of 128x128 class ids, over each shipped XML profile. The receiver starts after
 // the snapshot was written (TRANSIENT_LOCAL late join), verifies every message against the
-// synthetic generator, and counts four malformed chunks as drops.
+// synthetic generator, and counts four malformed chunks as drops. SecureUdpProfile runs the
+// UDP transfer again with DDS Security on, so the two runs' figures show what security costs.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
@@ -9,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -80,9 +82,27 @@ bool wait_for_file(const std::filesystem::path& path, std::chrono::seconds timeo
   return true;
 }
 
+// DDS Security of one side of the transfer: a folder of deploy/dds/make_security.sh and a role.
+struct PeerSecurity {
+  std::string dir, role;
+  std::vector<std::string> args() const {
+    if (dir.empty()) return {};
+    return {"--security", dir, "--role", role};
+  }
+};
+
+// `args` followed by the flags of `security`.
+std::vector<std::string> with_security(std::vector<std::string> args,
+                                       const PeerSecurity& security) {
+  for (auto& arg : security.args()) args.push_back(arg);
+  return args;
+}
+
 // Runs publisher and late-joining receiver over the profiles file `profiles`; `profile` names
 // it in the log.
-void run_transfer(const std::string& profile, const std::string& profiles, const TempDir& dir) {
+void run_transfer(const std::string& profile, const std::string& profiles, const TempDir& dir,
+                  const PeerSecurity& publisher_security = {},
+                  const PeerSecurity& receiver_security = {}) {
   const std::string domain = std::to_string(unique_domain_id());
   const std::string run_id = "transfer-" + std::to_string(::getpid());
   const std::string peer = INDRIVE_DDS_PEER;
@@ -90,17 +110,21 @@ void run_transfer(const std::string& profile, const std::string& profiles, const
   const auto publisher_result = dir.path() / "publisher.txt";
   const auto receiver_result = dir.path() / "receiver.txt";
 
-  Child publisher({peer, "publish", "--profiles", profiles, "--domain", domain, "--run-id", run_id,
-                   "--chunks", std::to_string(kChunks), "--snapshot-mb", "10", "--ready",
-                   ready.string(), "--result", publisher_result.string(), "--timeout", "40"});
+  Child publisher(
+      with_security({peer, "publish", "--profiles", profiles, "--domain", domain, "--run-id",
+                     run_id, "--chunks", std::to_string(kChunks), "--snapshot-mb", "10", "--ready",
+                     ready.string(), "--result", publisher_result.string(), "--timeout", "40"},
+                    publisher_security));
   ASSERT_TRUE(publisher.started()) << "could not start " << peer;
   ASSERT_TRUE(wait_for_file(ready, std::chrono::seconds(20)))
       << "publisher never wrote the snapshot";
 
   // The receiver joins only now, after the snapshot was written.
-  Child receiver({peer, "receive", "--profiles", profiles, "--domain", domain, "--run-id", run_id,
-                  "--chunks", std::to_string(kChunks), "--snapshot-mb", "10", "--result",
-                  receiver_result.string(), "--timeout", "40"});
+  Child receiver(
+      with_security({peer, "receive", "--profiles", profiles, "--domain", domain, "--run-id",
+                     run_id, "--chunks", std::to_string(kChunks), "--snapshot-mb", "10", "--result",
+                     receiver_result.string(), "--timeout", "40"},
+                    receiver_security));
   ASSERT_TRUE(receiver.started());
   const int receiver_code = receiver.wait(std::chrono::seconds(50));
   const int publisher_code = publisher.wait(std::chrono::seconds(10));
@@ -130,8 +154,9 @@ void run_transfer(const std::string& profile, const std::string& profiles, const
                              << " MB/s on the wire, " << sent.at("raw_mb_per_s")
                              << " MB/s of frames; write retries " << sent.at("write_retries");
   INDRIVE_LOG(kInfo, "test") << profile << ": receiver saw chunks for " << received.at("chunk_s")
-                             << " s; generating them took the publisher " << sent.at("generate_s")
-                             << " s";
+                             << " s (" << sent.at("wire_mb") / received.at("chunk_s")
+                             << " MB/s on the wire from first to last chunk); generating them "
+                             << "took the publisher " << sent.at("generate_s") << " s";
   ::testing::Test::RecordProperty("wire_mb_per_s", std::to_string(sent.at("wire_mb_per_s")));
 }
 
@@ -143,6 +168,41 @@ void run_transfer(const std::string& profile) {
 TEST(DdsTransfer, DefaultUdpProfile) { run_transfer("default.xml"); }
 
 TEST(DdsTransfer, SingleHostSharedMemoryProfile) { run_transfer("single_host.xml"); }
+
+// The UDP transfer with DDS Security on: authentication, access control, and encryption of
+// discovery, RTPS messages and payloads as the governance of make_security.sh asks. The
+// receiver is the shipped observer role; the publisher writes both the snapshot and the chunks,
+// which no shipped role may do, so it runs as a learner whose permissions this test widens by
+// the trajectory topic and signs again with the folder's CA (the shipped roles stay as they are).
+TEST(DdsTransfer, SecureUdpProfile) {
+  TempDir dir("indrive-dds-transfer");
+  const auto security = dir.path() / "security";
+  const std::string script = source_path("deploy/dds/make_security.sh").string();
+  ASSERT_EQ(std::system(("bash '" + script + "' '" + security.string() + "' > '" +
+                         (dir.path() / "make_security.log").string() + "' 2>&1")
+                            .c_str()),
+            0)
+      << "make_security.sh failed; see " << (dir.path() / "make_security.log");
+
+  const auto xml_path = security / "permissions-learner.xml";
+  std::ifstream in(xml_path);
+  std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string policy_topic = "<topic>indrive/policy</topic>";
+  const auto at = xml.find(policy_topic);  // the first one is in the publish list
+  ASSERT_NE(at, std::string::npos) << "permissions-learner.xml no longer publishes the policy";
+  ASSERT_LT(at, xml.find("<subscribe>"));
+  xml.insert(at + policy_topic.size(), "<topic>indrive/trajectory</topic>");
+  std::ofstream(xml_path) << xml;
+  const std::string sign = "openssl smime -sign -text -md sha256 -in '" + xml_path.string() +
+                           "' -signer '" + (security / "ca.pem").string() + "' -inkey '" +
+                           (security / "ca.key").string() + "' -out '" +
+                           (security / "permissions-learner.p7s").string() + "'";
+  ASSERT_EQ(std::system(sign.c_str()), 0) << sign;
+
+  run_transfer("default.xml + DDS Security", source_path("deploy/dds/default.xml").string(), dir,
+               {.dir = security.string(), .role = "learner"},
+               {.dir = security.string(), .role = "observer"});
+}
 
 // Discovery through a server (no multicast): the shipped file with the server's port moved to
 // one of this test's own, so parallel runs do not share a server.

@@ -31,6 +31,7 @@ struct ServiceOptions {
   int domain_id = -1;                  // --domain; -1: the config's dds.domain_id
   std::string dds_profile;             // --dds-profile; empty: config, env var, then built-in
   std::string discovery_server;        // --discovery-server HOST:PORT; empty: config, env var
+  std::string dds_security;            // --dds-security; empty: config's dds.security_dir
   std::vector<std::string> overrides;  // --set key=value, in order
   bool check_only = false;             // --check-config: resolve, summarise and exit
 };
@@ -45,8 +46,8 @@ const config::Schema& service_schema();
 // A resolved run configuration with typed accessors for what the processes need.
 class ServiceConfig {
  public:
-  // Resolves defaults -> preset -> file -> --set, applies --domain and --dds-profile, and
-  // checks that the agent part is usable. Throws config::ConfigError or
+  // Resolves defaults -> preset -> file -> --set, applies --domain, --dds-profile and
+  // --dds-security, and checks that the agent part is usable. Throws config::ConfigError or
   // agent::AgentConfigError with what is wrong.
   static ServiceConfig resolve(const ServiceOptions& options);
 
@@ -58,8 +59,9 @@ class ServiceConfig {
   // The XML profiles file to load (never empty: falls back to the shipped single-host one).
   const std::string& dds_profile() const { return dds_profile_; }
   // What a participant of this run is made from: domain, profiles file and the dds.* keys
-  // (discovery server, ...).
-  dds::ParticipantOptions participant_options() const;
+  // (discovery server, security folder); `own_role` is the security role when dds.security_role
+  // is empty ("learner", "actor" or "evaluator").
+  dds::ParticipantOptions participant_options(const std::string& own_role) const;
 
   // The agent's configuration (preset sizes plus every agent.* key).
   agent::AgentConfig agent() const;

@@ -71,6 +71,10 @@ struct ParticipantOptions {
   // the profile must be a discovery-server client (deploy/dds/discovery_server.xml). Empty:
   // $INDRIVE_DISCOVERY_SERVER, and when that is unset too, the profile's own address.
   std::string discovery_server{};
+  // Folder made by deploy/dds/make_security.sh; empty: no DDS Security (dds_security.h).
+  std::string security_dir{};
+  // Role whose certificate and permissions the participant uses with security_dir.
+  std::string security_role{};
 };
 
 // A discovery server's address: `host` as given, `ipv4` the address it resolved to, and

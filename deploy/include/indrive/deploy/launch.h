@@ -20,6 +20,7 @@ struct LaunchOptions {
   int evaluators = 1;
   int domain_id = 0;
   std::filesystem::path dds_profile;   // XML profiles file; empty: the processes' default
+  std::filesystem::path dds_security;  // DDS Security folder (make_security.sh); empty: off
   std::vector<std::string> overrides;  // --set key=value, forwarded to every process
   std::filesystem::path bin_dir;       // where indrive-learner and indrive-actor live
   double status_interval_s = 10.0;     // how often the combined status line is printed
