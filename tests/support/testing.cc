@@ -4,6 +4,9 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
 #include <random>
 #include <stdexcept>
 #include <system_error>
@@ -57,6 +60,36 @@ int unique_domain_id() {
 
 std::filesystem::path source_path(const std::string& relative) {
   return std::filesystem::path(INDRIVE_SOURCE_DIR) / relative;
+}
+
+void make_security_folder(const std::filesystem::path& dir) {
+  const std::string log = dir.string() + ".log";
+  const std::string command = "bash '" + source_path("deploy/dds/make_security.sh").string() +
+                              "' '" + dir.string() + "' > '" + log + "' 2>&1";
+  if (std::system(command.c_str()) != 0) {
+    std::ifstream in(log);
+    throw std::runtime_error("make_security.sh failed: " +
+                             std::string(std::istreambuf_iterator<char>(in), {}));
+  }
+}
+
+void allow_publishing(const std::filesystem::path& dir, const std::string& role,
+                      const std::string& topic) {
+  const auto xml_path = dir / ("permissions-" + role + ".xml");
+  std::ifstream in(xml_path);
+  std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto publish = xml.find("<publish>");
+  const auto topics = xml.find("<topics>", publish);
+  if (publish == std::string::npos || topics == std::string::npos) {
+    throw std::runtime_error(xml_path.string() + " has no <publish><topics> list");
+  }
+  xml.insert(topics + std::string("<topics>").size(), "<topic>" + topic + "</topic>");
+  std::ofstream(xml_path) << xml;
+  const std::string sign = "openssl smime -sign -text -md sha256 -in '" + xml_path.string() +
+                           "' -signer '" + (dir / "ca.pem").string() + "' -inkey '" +
+                           (dir / "ca.key").string() + "' -out '" +
+                           (dir / ("permissions-" + role + ".p7s")).string() + "'";
+  if (std::system(sign.c_str()) != 0) throw std::runtime_error("'" + sign + "' failed");
 }
 
 }  // namespace indrive::testing

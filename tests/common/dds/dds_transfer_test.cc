@@ -177,27 +177,8 @@ TEST(DdsTransfer, SingleHostSharedMemoryProfile) { run_transfer("single_host.xml
 TEST(DdsTransfer, SecureUdpProfile) {
   TempDir dir("indrive-dds-transfer");
   const auto security = dir.path() / "security";
-  const std::string script = source_path("deploy/dds/make_security.sh").string();
-  ASSERT_EQ(std::system(("bash '" + script + "' '" + security.string() + "' > '" +
-                         (dir.path() / "make_security.log").string() + "' 2>&1")
-                            .c_str()),
-            0)
-      << "make_security.sh failed; see " << (dir.path() / "make_security.log");
-
-  const auto xml_path = security / "permissions-learner.xml";
-  std::ifstream in(xml_path);
-  std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const std::string policy_topic = "<topic>indrive/policy</topic>";
-  const auto at = xml.find(policy_topic);  // the first one is in the publish list
-  ASSERT_NE(at, std::string::npos) << "permissions-learner.xml no longer publishes the policy";
-  ASSERT_LT(at, xml.find("<subscribe>"));
-  xml.insert(at + policy_topic.size(), "<topic>indrive/trajectory</topic>");
-  std::ofstream(xml_path) << xml;
-  const std::string sign = "openssl smime -sign -text -md sha256 -in '" + xml_path.string() +
-                           "' -signer '" + (security / "ca.pem").string() + "' -inkey '" +
-                           (security / "ca.key").string() + "' -out '" +
-                           (security / "permissions-learner.p7s").string() + "'";
-  ASSERT_EQ(std::system(sign.c_str()), 0) << sign;
+  make_security_folder(security);
+  allow_publishing(security, "learner", "indrive/trajectory");
 
   run_transfer("default.xml + DDS Security", source_path("deploy/dds/default.xml").string(), dir,
                {.dir = security.string(), .role = "learner"},
