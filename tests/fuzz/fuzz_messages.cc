@@ -43,7 +43,7 @@ msg::PolicySnapshot real_snapshot() {
   snapshot.env_steps(1234);
   snapshot.updates(56);
   snapshot.params(agent.snapshot());
-  dds::seal(snapshot);
+  indrive::dds::seal(snapshot);
   return snapshot;
 }
 
@@ -58,12 +58,12 @@ void seed(const fuzz::fs::path& dir, const std::string& name, Kind kind, const T
 void make_seeds(const fuzz::fs::path& dir) {
   const auto snapshot = real_snapshot();
   seed(dir, "snapshot", kSnapshot, snapshot);
-  seed(dir, "announce", kAnnounce, dds::announce_for(snapshot));
+  seed(dir, "announce", kAnnounce, indrive::dds::announce_for(snapshot));
   msg::SnapshotRequest request;
   request.run_id("fuzz");
   request.requester_role(msg::ROLE_EVALUATOR);
   request.requester_id(2);
-  dds::seal(request);
+  indrive::dds::seal(request);
   seed(dir, "request", kRequest, request);
   msg::StepAllowance allowance;
   allowance.run_id("fuzz");
@@ -71,7 +71,7 @@ void make_seeds(const fuzz::fs::path& dir) {
   allowance.replay_ratio(32);
   allowance.learner_epoch(2);
   allowance.policy_version(7);
-  dds::seal(allowance);
+  indrive::dds::seal(allowance);
   seed(dir, "allowance", kAllowance, allowance);
   msg::EpisodeResult result;
   result.run_id("fuzz");
@@ -84,14 +84,14 @@ void make_seeds(const fuzz::fs::path& dir) {
   result.steps(321);
   result.route_completion(0.4f);
   result.reach_segments(12);
-  dds::seal(result);
+  indrive::dds::seal(result);
   seed(dir, "result", kResult, result);
   msg::Heartbeat beat;
   beat.role(msg::ROLE_LEARNER);
   beat.run_id("fuzz");
   beat.state("running");
   beat.env_steps(999);
-  dds::seal(beat);
+  indrive::dds::seal(beat);
   seed(dir, "heartbeat", kHeartbeat, beat);
 }
 
@@ -106,7 +106,7 @@ struct Receiver {
 template <typename T>
 bool decode(const std::uint8_t* data, std::size_t size, T& message) {
   if (!fuzz::from_cdr(std::span(data + 1, size - 1), message)) return false;
-  if (data[0] & 1) dds::seal(message);
+  if (data[0] & 1) indrive::dds::seal(message);
   return true;
 }
 
@@ -140,18 +140,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     case kRequest: {
       msg::SnapshotRequest request;
-      if (decode(data, size, request)) dds::validate(request, "fuzz");
+      if (decode(data, size, request)) indrive::dds::validate(request, "fuzz");
       break;
     }
     case kAllowance: {
       msg::StepAllowance allowance;
-      if (decode(data, size, allowance)) dds::validate(allowance, "fuzz");
+      if (decode(data, size, allowance)) indrive::dds::validate(allowance, "fuzz");
       break;
     }
     case kResult: {
       msg::EpisodeResult result;
       if (!decode(data, size, result)) return 0;
-      if (dds::validate(result, "fuzz") == dds::DropReason::kOk &&
+      if (indrive::dds::validate(result, "fuzz") == indrive::dds::DropReason::kOk &&
           result.sender_role() == msg::ROLE_ACTOR) {
         receiver.episodes.add(result.steps(), result.reach_segments());
         nlohmann::json record;
@@ -161,7 +161,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     case kHeartbeat: {
       msg::Heartbeat beat;
-      if (decode(data, size, beat)) dds::validate(beat, "fuzz");
+      if (decode(data, size, beat)) indrive::dds::validate(beat, "fuzz");
       break;
     }
     case kKinds:
