@@ -2,14 +2,13 @@
 
 #include <fcntl.h>
 #include <sched.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
-#include <array>
 #include <atomic>
-#include <cstdio>
 #include <filesystem>
 #include <stdexcept>
+
+#include "testing.h"
 
 namespace indrive::testing {
 namespace {
@@ -17,24 +16,11 @@ namespace {
 constexpr const char* kLinkA = "veth-a";
 constexpr const char* kLinkB = "veth-b";
 
-// Runs a shell command line; returns its exit status and appends its output to `output`.
-int run(const std::string& command, std::string& output) {
-  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
-  if (pipe == nullptr) {
-    output += "cannot run '" + command + "'\n";
-    return -1;
-  }
-  std::array<char, 512> buffer{};
-  while (std::fgets(buffer.data(), buffer.size(), pipe) != nullptr) output += buffer.data();
-  const int status = ::pclose(pipe);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
 // Runs every command in order; throws with the command and its output when one fails.
 void run_all(const std::vector<std::string>& commands) {
   for (const auto& command : commands) {
     std::string output;
-    if (run(command, output) != 0) {
+    if (run_command(command, output) != 0) {
       throw std::runtime_error("'" + command + "' failed: " + output);
     }
   }
@@ -98,7 +84,8 @@ HostPair::~HostPair() {
   const std::string ip = ip_program();
   std::string ignored;
   for (const auto& ns : {ns_a_, ns_b_}) {
-    if (!ns.empty()) run(ip + " netns del " + ns, ignored);  // deletes its end of the link too
+    if (!ns.empty())
+      run_command(ip + " netns del " + ns, ignored);  // deletes its end of the link too
   }
 }
 

@@ -2,8 +2,10 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
@@ -60,6 +62,18 @@ int unique_domain_id() {
 
 std::filesystem::path source_path(const std::string& relative) {
   return std::filesystem::path(INDRIVE_SOURCE_DIR) / relative;
+}
+
+int run_command(const std::string& command, std::string& output) {
+  output.clear();
+  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
+  if (pipe == nullptr) return -1;
+  char buffer[4096];
+  while (const std::size_t read = std::fread(buffer, 1, sizeof(buffer), pipe)) {
+    output.append(buffer, read);
+  }
+  const int status = ::pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 void make_security_folder(const std::filesystem::path& dir) {

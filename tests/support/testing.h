@@ -26,6 +26,21 @@ int unique_domain_id();
 // Absolute path of a file in the source tree, e.g. source_path("deploy/dds/single_host.xml").
 std::filesystem::path source_path(const std::string& relative);
 
+// Runs a shell command line; returns its exit status (-1 when it did not exit normally) and
+// puts what it wrote to stdout and stderr in `output`.
+int run_command(const std::string& command, std::string& output);
+
+// The message of the `Error` that `make()` throws, or "(no exception)" when it throws none.
+template <typename Error, typename F>
+std::string error_of(F&& make) {
+  try {
+    make();
+  } catch (const Error& error) {
+    return error.what();
+  }
+  return "(no exception)";
+}
+
 // Makes a run's DDS Security folder at `dir` with deploy/dds/make_security.sh; its output goes
 // to `dir`.log. Throws std::runtime_error (with that output) when the script fails.
 void make_security_folder(const std::filesystem::path& dir);

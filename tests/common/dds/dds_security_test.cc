@@ -30,49 +30,34 @@ using namespace std::chrono_literals;
 // Every participant here loads the same profiles file (one file per process, see dds.cc).
 std::string profiles() { return testing::source_path("deploy/dds/default.xml").string(); }
 
-// Runs a shell command; returns its exit status and puts stdout and stderr in `output`.
-int run(const std::string& command, std::string& output) {
-  output.clear();
-  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
-  if (pipe == nullptr) return -1;
-  char buffer[4096];
-  while (const std::size_t read = std::fread(buffer, 1, sizeof(buffer), pipe)) {
-    output.append(buffer, read);
-  }
-  const int status = ::pclose(pipe);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+using testing::run_command;
 
 std::string make_security(const fs::path& dir, const std::string& options = "") {
   std::string output;
-  const int code = run("bash '" + testing::source_path("deploy/dds/make_security.sh").string() +
-                           "' '" + dir.string() + "' " + options,
-                       output);
+  const int code =
+      run_command("bash '" + testing::source_path("deploy/dds/make_security.sh").string() + "' '" +
+                      dir.string() + "' " + options,
+                  output);
   EXPECT_EQ(code, 0) << output;
   return output;
 }
 
-// One security folder per test process (making one takes about a second), plus a second run's
-// folder whose files must be refused next to the first one's.
+// A folder made in `dir`, once per test process (making one takes about a second).
+fs::path made_in(const testing::TempDir& dir) {
+  make_security(dir.path() / "run");
+  return dir.path() / "run";
+}
+
+// The run's folder, and a second run's whose files must be refused next to the first one's.
 const fs::path& security_dir() {
-  static testing::TempDir dir("indrive-security");
-  static const bool made = [] {
-    make_security(dir.path() / "run");
-    return true;
-  }();
-  (void)made;
-  static const fs::path path = dir.path() / "run";
+  static const testing::TempDir dir("indrive-security");
+  static const fs::path path = made_in(dir);
   return path;
 }
 
 const fs::path& other_security_dir() {
-  static testing::TempDir dir("indrive-security-other");
-  static const bool made = [] {
-    make_security(dir.path() / "run");
-    return true;
-  }();
-  (void)made;
-  static const fs::path path = dir.path() / "run";
+  static const testing::TempDir dir("indrive-security-other");
+  static const fs::path path = made_in(dir);
   return path;
 }
 
@@ -87,22 +72,12 @@ struct DamagedCopy {
 };
 
 std::string check_error(const fs::path& dir, const std::string& role) {
-  try {
-    check_security_files(dir, role);
-  } catch (const DdsError& error) {
-    return error.what();
-  }
-  return "(no DdsError)";
+  return testing::error_of<DdsError>([&] { check_security_files(dir, role); });
 }
 
 template <typename F>
 std::string error_of(F&& make) {
-  try {
-    make();
-  } catch (const DdsError& error) {
-    return error.what();
-  }
-  return "(no DdsError)";
+  return testing::error_of<DdsError>(std::forward<F>(make));
 }
 
 // Re-issues <role>.pem in `dir` with the same subject and key, signed by the folder's CA, valid
@@ -214,7 +189,7 @@ TEST(DdsSecurityFiles, ScriptRefusesToOverwriteAFolderWithoutForce) {
   make_security(dir, "--days 2 --domain 9");
   std::string output;
   const std::string script = testing::source_path("deploy/dds/make_security.sh").string();
-  EXPECT_NE(run("bash '" + script + "' '" + dir.string() + "'", output), 0);
+  EXPECT_NE(run_command("bash '" + script + "' '" + dir.string() + "'", output), 0);
   EXPECT_NE(output.find("--force"), std::string::npos) << output;
   const std::string old_ca = testing::slurp(dir / "ca.pem");
   EXPECT_NE(old_ca, "");
@@ -222,7 +197,7 @@ TEST(DdsSecurityFiles, ScriptRefusesToOverwriteAFolderWithoutForce) {
   EXPECT_NE(printed.find("--dds-security"), std::string::npos) << "usage hint: " << printed;
   EXPECT_NE(testing::slurp(dir / "ca.pem"), old_ca) << "--force makes a new CA";
   EXPECT_NE(testing::slurp(dir / "governance.xml").find("<id_range>"), std::string::npos);
-  EXPECT_EQ(check_error(dir, "actor"), "(no DdsError)");
+  EXPECT_EQ(check_error(dir, "actor"), "(no exception)");
 }
 
 TEST(DdsSecurityFiles, UnknownRoleListsTheRoles) {
@@ -248,7 +223,7 @@ TEST(DdsSecurityFiles, MissingFolderAndFilesAreNamed) {
   // Another role's files do not stand in for this role's.
   DamagedCopy copy;
   fs::remove(copy.dir / "permissions-actor.p7s");
-  EXPECT_EQ(check_error(copy.dir, "learner"), "(no DdsError)");
+  EXPECT_EQ(check_error(copy.dir, "learner"), "(no exception)");
   EXPECT_NE(check_error(copy.dir, "actor").find("permissions-actor.p7s"), std::string::npos);
 }
 
@@ -267,7 +242,7 @@ TEST(DdsSecurityFiles, ExpiredAndNotYetValidCertificatesSayWhen) {
 
   // The same subject and key, valid now, signed by the same CA: accepted again.
   reissue_certificate(copy.dir, "learner", -60, 86400);
-  EXPECT_EQ(check_error(copy.dir, "learner"), "(no DdsError)");
+  EXPECT_EQ(check_error(copy.dir, "learner"), "(no exception)");
 }
 
 TEST(DdsSecurityFiles, CertificateOfAnotherCaIsNamed) {

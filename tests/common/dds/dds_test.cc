@@ -19,12 +19,7 @@ std::string profiles() { return testing::source_path("deploy/dds/default.xml").s
 
 template <typename F>
 std::string error_of(F&& make) {
-  try {
-    make();
-  } catch (const DdsError& error) {
-    return error.what();
-  }
-  return "(no DdsError)";
+  return testing::error_of<DdsError>(std::forward<F>(make));
 }
 
 TEST(DdsParticipant, MissingProfilesFileNamesThePath) {
