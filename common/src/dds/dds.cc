@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/log/Log.hpp>
+#include <iterator>
 #include <string_view>
 #include <thread>
 
@@ -22,31 +23,50 @@ namespace {
 using eprosima::fastdds::dds::DomainParticipantFactory;
 using eprosima::fastrtps::types::ReturnCode_t;
 
+// Fast DDS log lines that say nothing about the run, with why; each is dropped, and the first
+// one of a kind is replaced by its note (when it has one).
+struct HarmlessLine {
+  const char* category;  // Fast DDS's category; nullptr: any
+  const char* text;      // found in the message
+  const char* note;      // logged once instead, at info level; nullptr: nothing
+};
+constexpr HarmlessLine kHarmlessLines[] = {
+    // A snapshot writer with several matched readers sends its fragments once per receiving
+    // port with no reader named, so every reader of that participant looks at them. The policy
+    // reader takes them; a best-effort reader of another topic (the heartbeat reader) finds no
+    // such writer among its own and warns, once per fragment: about 4,000 lines in two minutes
+    // of a two-host run, for data that did arrive. Reliable readers stay silent in the same
+    // case, and shared memory (single_host.xml) sends a snapshot unfragmented.
+    {"RTPS_MSG_IN", "received DATA_FRAG from unknown writer",
+     "[RTPS_MSG_IN] fragments of a sample meant for another reader of this participant reach "
+     "the heartbeat reader too; Fast DDS's 'received DATA_FRAG from unknown writer' warning for "
+     "them is not shown (harmless)"},
+    // With DDS Security, while two participants exchange keys, messages that overtake the key
+    // material are dropped (and sent again by the reliable protocol); Fast DDS warns once per
+    // message, about a hundred lines per peer at start-up.
+    {nullptr, "No key material yet", nullptr},
+};
+
 // Forwards Fast DDS log entries to the project's sink, so nothing lands on stdout.
 class SinkConsumer : public eprosima::fastdds::dds::LogConsumer {
  public:
   void Consume(const eprosima::fastdds::dds::Log::Entry& entry) override {
     using Kind = eprosima::fastdds::dds::Log::Kind;
-    if (is_foreign_fragment_warning(entry)) {
-      // A snapshot writer with several matched readers sends its fragments once per receiving
-      // port with no reader named, so every reader of that participant looks at them. The
-      // policy reader takes them; a best-effort reader of another topic (the heartbeat reader)
-      // finds no such writer among its own and warns, once per fragment: about 4,000 lines in
-      // two minutes of a two-host run, for data that did arrive. Reliable readers stay silent
-      // in the same case, and shared memory (single_host.xml) sends a snapshot unfragmented.
-      if (foreign_fragments_.fetch_add(1) == 0) {
-        log::write(log::Level::kInfo, "fastdds",
-                   "[RTPS_MSG_IN] fragments of a sample meant for another reader of this "
-                   "participant reach the heartbeat reader too; Fast DDS's 'received DATA_FRAG "
-                   "from unknown writer' warning for them is not shown (harmless)",
-                   __FILE__, __LINE__);
+    const char* category = entry.context.category != nullptr ? entry.context.category : "";
+    for (std::size_t i = 0; i < std::size(kHarmlessLines); ++i) {
+      const HarmlessLine& line = kHarmlessLines[i];
+      if ((line.category != nullptr && std::string_view(category) != line.category) ||
+          entry.message.find(line.text) == std::string::npos) {
+        continue;
+      }
+      if (dropped_[i].fetch_add(1) == 0 && line.note != nullptr) {
+        log::write(log::Level::kInfo, "fastdds", line.note, __FILE__, __LINE__);
       }
       return;
     }
     const log::Level level = entry.kind == Kind::Error     ? log::Level::kError
                              : entry.kind == Kind::Warning ? log::Level::kWarn
                                                            : log::Level::kDebug;
-    const char* category = entry.context.category != nullptr ? entry.context.category : "";
     const std::string message = std::string("[") + category + "] " + entry.message;
     log::write(level, "fastdds", message,
                entry.context.filename != nullptr ? entry.context.filename : "fastdds",
@@ -54,13 +74,7 @@ class SinkConsumer : public eprosima::fastdds::dds::LogConsumer {
   }
 
  private:
-  static bool is_foreign_fragment_warning(const eprosima::fastdds::dds::Log::Entry& entry) {
-    return entry.kind == eprosima::fastdds::dds::Log::Kind::Warning &&
-           entry.context.category != nullptr &&
-           std::string_view(entry.context.category) == "RTPS_MSG_IN" &&
-           entry.message.find("received DATA_FRAG from unknown writer") != std::string::npos;
-  }
-  std::atomic<std::uint64_t> foreign_fragments_{0};
+  std::atomic<std::uint64_t> dropped_[std::size(kHarmlessLines)] = {};
 };
 
 std::filesystem::path canonical_or_same(const std::filesystem::path& path) {

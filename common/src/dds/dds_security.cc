@@ -11,12 +11,9 @@
 #include <algorithm>
 #include <cstdlib>
 #include <ctime>
-#include <fastdds/dds/log/Log.hpp>
 #include <iomanip>
 #include <memory>
-#include <mutex>
 #include <pugixml.hpp>
-#include <regex>
 #include <sstream>
 #include <vector>
 
@@ -352,13 +349,7 @@ void apply_security(eprosima::fastdds::dds::DomainParticipantQos& qos,
   set_property(properties, "dds.sec.access.builtin.Access-Permissions.permissions",
                file_uri(files.permissions));
   set_property(properties, "dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
-  // While two participants exchange keys, messages that overtake the key material are dropped
-  // (and sent again by the reliable protocol); Fast DDS warns once per message, a hundred lines
-  // per peer at start-up that say nothing about the run. Every other line still comes through.
-  static std::once_flag quiet_key_exchange;
-  std::call_once(quiet_key_exchange, [] {
-    eprosima::fastdds::dds::Log::SetErrorStringFilter(std::regex("^(?!No key material yet)"));
-  });
+  // Fast DDS's key-exchange warnings are dropped in the log sink (dds.cc, kHarmlessLines).
   INDRIVE_LOG(kInfo, "dds") << "DDS Security on: role " << role << ", files from "
                             << files.identity_ca.parent_path().string();
 }
