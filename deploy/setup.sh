@@ -23,7 +23,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
   sumo
-  libeigen3-dev libdnnl-dev libopencv-dev
+  libeigen3-dev libdnnl-dev ocl-icd-opencl-dev libopencv-dev
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libpugixml-dev zlib1g-dev libzstd-dev
   libssl-dev openssl
   libgtest-dev libgmock-dev

@@ -51,7 +51,8 @@ int main(int argc, char** argv) {
     if (continuous) options.overrides.push_back("eval.continuous=true");
     const auto config = indrive::actor::ServiceConfig::resolve(options);
     if (options.check_only) {
-      std::printf("%s\n", indrive::actor::check_summary(config).c_str());
+      const char* role = evaluate ? "evaluator" : "actor";
+      std::printf("%s\n", indrive::actor::check_summary(config, role).c_str());
       return 0;
     }
     if (evaluate) {

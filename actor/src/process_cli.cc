@@ -3,6 +3,7 @@
 #include <signal.h>
 
 #include "indrive/common/dds.h"
+#include "indrive/common/dds_security.h"
 
 namespace indrive::actor {
 namespace {
@@ -17,6 +18,16 @@ std::string discovery_summary(const ServiceConfig& config) {
   const auto server =
       dds::resolve_discovery_server(config.config().get<std::string>("dds.discovery_server"));
   return server ? ", discovery server " + server->describe() : "";
+}
+
+// ", DDS Security as ROLE from DIR" once the role's files pass check_security_files, which
+// throws naming the bad file; "" without security.
+std::string security_summary(const ServiceConfig& config, const std::string& own_role) {
+  const dds::ParticipantOptions options = config.participant_options(own_role);
+  if (options.security_dir.empty()) return "";
+  dds::check_security_files(options.security_dir, options.security_role);
+  return ", DDS Security as " + options.security_role + " from " + options.security_dir +
+         " (certificate, key, permissions and governance checked)";
 }
 
 }  // namespace
@@ -41,12 +52,13 @@ void add_service_options(CLI::App& app, ServiceOptions& options, std::string& lo
                "resolve the configuration and DDS profile, print a summary and exit");
 }
 
-std::string check_summary(const ServiceConfig& config) {
+std::string check_summary(const ServiceConfig& config, const std::string& own_role) {
   const agent::AgentConfig agent = config.agent();
   return "config ok: run '" + config.run_id() + "', preset " + agent.preset + ", phase " +
          std::string(agent::to_string(agent.phase)) + ", domain " +
          std::to_string(config.domain_id()) + ", DDS profiles " +
-         dds::resolve_profiles_file(config.dds_profile()).string() + discovery_summary(config);
+         dds::resolve_profiles_file(config.dds_profile()).string() + discovery_summary(config) +
+         security_summary(config, own_role);
 }
 
 const std::atomic<bool>& install_stop_signals() {

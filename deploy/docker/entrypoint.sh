@@ -2,7 +2,8 @@
 # Entrypoint of the InDRiVE image: picks the DDS profile, then runs the command.
 #
 #   INDRIVE_DISCOVERY_SERVER=host:port  every participant is a client of that discovery server
-#                                       (deploy/dds/discovery_server.xml with its address);
+#                                       (deploy/dds/discovery_server.xml; the programs read the
+#                                       address from this variable);
 #   INDRIVE_DISCOVERY_SERVER empty      UDP with multicast discovery (deploy/dds/default.xml).
 # Shared memory (single_host.xml) is never used: it does not cross containers.
 #
@@ -42,12 +43,11 @@ if [ "${1:-}" = "discovery-server" ]; then
 fi
 
 if [ -n "$server" ]; then
-  address=$(resolve "$host")
-  profile="${TMPDIR:-/tmp}/indrive-discovery-client.xml"
-  sed -e "s|<address>127.0.0.1</address>|<address>$address</address>|" \
-      -e "s|<port>11811</port>|<port>$port</port>|" \
-      "$data/deploy/dds/discovery_server.xml" > "$profile"
-  echo "entrypoint: DDS through the discovery server $address:$port" >&2
+  # The programs read INDRIVE_DISCOVERY_SERVER themselves (and resolve the name); waiting here
+  # only lets a container that starts before the discovery server's name exists wait for it.
+  resolve "$host" >/dev/null
+  profile="$data/deploy/dds/discovery_server.xml"
+  echo "entrypoint: DDS through the discovery server $server" >&2
 else
   profile="$data/deploy/dds/default.xml"
   echo "entrypoint: DDS over UDP with multicast discovery" >&2

@@ -23,6 +23,7 @@
 #include "indrive/common/log.h"
 #include "indrive/common/nn/kernels.h"
 #include "indrive/common/run_dir.h"
+#include "indrive/learner/evaluation_tally.h"
 #include "indrive/learner/ingest.h"
 #include "indrive/learner/rate_limiter.h"
 
@@ -533,6 +534,10 @@ struct Learner::Impl {
 
   void on_result(const msg::EpisodeResult& result) {
     if (dds::validate(result, config.run_id()) != dds::DropReason::kOk) return;
+    if (result.sender_role() == msg::ROLE_EVALUATOR) {
+      evaluations.add(result);
+      return;
+    }
     if (result.sender_role() != msg::ROLE_ACTOR) return;
     std::lock_guard<std::mutex> lock(queue_mutex);
     ++interval_episodes;
@@ -730,6 +735,7 @@ struct Learner::Impl {
                              {"phase", std::string(agent::to_string(agent_config.phase))}};
     if (episodes > 0) record["episode_success_rate"] = static_cast<double>(successes) / episodes;
     record.update(episode_record);
+    evaluations.write_new(record);
     for (const auto& [name, value] : last_metrics) record[name] = value;
     metrics.write(record);
 
@@ -835,6 +841,7 @@ struct Learner::Impl {
   RateLimiter rate;
   IngestOptions ingest;
   MetricsLog metrics;
+  EvaluationTally evaluations;  // evaluators' results, on the metrics lines
   std::int64_t budget = 0;
   std::int64_t snapshot_every = 10;
   double announce_s = 1.0;

@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
     const auto& stop = indrive::actor::install_stop_signals();
     const auto config = indrive::actor::ServiceConfig::resolve(options);
     if (options.check_only) {
-      std::printf("%s\n", indrive::actor::check_summary(config).c_str());
+      std::printf("%s\n", indrive::actor::check_summary(config, "learner").c_str());
       return 0;
     }
     indrive::learner::Learner learner(config);

@@ -121,6 +121,11 @@ TEST_F(InstalledTest, InstallPutsProgramsAndDataUnderThePrefix) {
         "deploy/docker/entrypoint.sh"}) {
     EXPECT_TRUE(fs::is_regular_file(share() / file)) << file;
   }
+  // The scripts a user runs from the installed tree are executable.
+  for (const char* script : {"deploy/docker/entrypoint.sh", "deploy/dds/make_security.sh"}) {
+    const auto permissions = fs::status(share() / script).permissions();
+    EXPECT_NE(permissions & fs::perms::owner_exec, fs::perms::none) << script;
+  }
 }
 
 TEST_F(InstalledTest, InstalledProgramsFindTheirDataBesideThemselves) {
@@ -183,16 +188,17 @@ TEST_F(InstalledTest, EveryComposeServiceRunsAValidCommand) {
     const Output checked = in_container(argv, "INDRIVE_DISCOVERY_SERVER=localhost:11811");
     EXPECT_EQ(checked.status, 0) << name << ":\n" << checked.text;
     EXPECT_THAT(checked.text, HasSubstr("config ok: run 'compose', preset tiny")) << name;
-    EXPECT_THAT(checked.text, HasSubstr("indrive-discovery-client.xml")) << name;
+    EXPECT_THAT(checked.text, HasSubstr("deploy/dds/discovery_server.xml")) << name;
+    // The programs take the server's address from the variable the entrypoint passes on.
+    EXPECT_THAT(
+        checked.text,
+        HasSubstr("discovery server localhost:11811 (127.0.0.1) from $INDRIVE_DISCOVERY_SERVER"))
+        << name;
   }
   EXPECT_EQ(indrive_services, 4);
   for (const char* name : {"discovery", "learner", "actor-0", "actor-1", "evaluator"}) {
     EXPECT_TRUE(names.contains(name)) << name;
   }
-  // The entrypoint pointed the profile at the resolved server address and port.
-  const std::string profile = slurp(dir_->path() / "indrive-discovery-client.xml");
-  EXPECT_THAT(profile, HasSubstr("<address>127.0.0.1</address><port>11811</port>"));
-  EXPECT_THAT(profile, HasSubstr("<discoveryProtocol>CLIENT</discoveryProtocol>"));
 }
 
 TEST_F(InstalledTest, CheckFailsOnABadCommand) {

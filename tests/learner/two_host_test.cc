@@ -238,6 +238,15 @@ TEST_F(TwoHosts, TwentySecondsWithoutTheLinkAreSurvived) {
   // down and delivered it after (a replaced participant would have lost them).
   EXPECT_EQ(last.value("sequence_gaps", -1), 0) << last.dump();
   EXPECT_EQ(count_lines(kUnknownWriterFragments), 0) << logs();
+  // The remote evaluator's results reached the learner's metrics, across the link.
+  std::uint64_t logged_version = 0;
+  for (const auto& line : lines) {
+    if (line.contains("eval_policy_version") && line.contains("eval_town01_success_rate")) {
+      logged_version = std::max(logged_version, line["eval_policy_version"].get<std::uint64_t>());
+    }
+  }
+  EXPECT_GE(logged_version, evaluated_before) << last.dump();
+  EXPECT_GE(last.value("eval_results", 0), 2) << last.dump();
   std::printf(
       "[figures] link down %.1f s (from %.1f s): remote actor heard again %.2f s after the link "
       "returned, with snapshot v%llu after %.2f s; evaluator evaluated v%llu (v%llu before the "

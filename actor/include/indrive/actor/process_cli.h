@@ -16,9 +16,11 @@ namespace indrive::actor {
 void add_service_options(CLI::App& app, ServiceOptions& options, std::string& log_level);
 
 // One line that says what a process would run with (run id, preset, phase, domain, DDS
-// profile); throws dds::DdsError when the profiles file cannot be found. Printed by
-// --check-config, which validates a command line without starting anything.
-std::string check_summary(const ServiceConfig& config);
+// profile, discovery server, security role and folder); throws dds::DdsError when the profiles
+// file cannot be found or, with --dds-security, when a security file of `own_role` (the
+// program's role unless dds.security_role says otherwise) is missing, expired or wrongly
+// signed. Printed by --check-config, which validates a command line without starting anything.
+std::string check_summary(const ServiceConfig& config, const std::string& own_role);
 
 // Installs SIGINT/SIGTERM handlers that set the returned flag (once per process).
 const std::atomic<bool>& install_stop_signals();
