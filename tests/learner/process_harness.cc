@@ -102,9 +102,12 @@ std::vector<pid_t> child_pids(pid_t parent, const std::vector<std::string>& word
   return found;
 }
 
-ProcessWatch::ProcessWatch(int domain_id, const fs::path& profiles_file) {
-  participant_ = std::make_unique<dds::Participant>(
-      dds::ParticipantOptions{.domain_id = domain_id, .profiles_file = profiles_file.string()});
+ProcessWatch::ProcessWatch(int domain_id, const fs::path& profiles_file)
+    : ProcessWatch(dds::ParticipantOptions{.domain_id = domain_id,
+                                           .profiles_file = profiles_file.string()}) {}
+
+ProcessWatch::ProcessWatch(const dds::ParticipantOptions& options) {
+  participant_ = std::make_unique<dds::Participant>(options);
   chunk_reader_ =
       participant_->make_reader<msg::TrajectoryChunk>([this](const msg::TrajectoryChunk& chunk) {
         if (chunk.actor_id() >= 100) return;  // a test's own injected chunks

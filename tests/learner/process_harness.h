@@ -85,6 +85,8 @@ struct SeenHeartbeat {
 class ProcessWatch {
  public:
   ProcessWatch(int domain_id, const std::filesystem::path& profiles_file);
+  // With every participant option given (DDS Security, discovery server).
+  explicit ProcessWatch(const dds::ParticipantOptions& options);
   ~ProcessWatch();
 
   std::vector<SeenChunk> chunks();

@@ -110,6 +110,30 @@ class TwoHosts : public ::testing::Test {
     }
     return {newest, count};
   }
+  // The first number after `pattern` (a regex with one group) in a log, or -1.
+  long long logged(const std::string& name, const std::string& pattern) const {
+    const std::string text = testing::slurp(dir_.path() / (name + ".log"));
+    std::smatch match;
+    return std::regex_search(text, match, std::regex(pattern)) ? std::stoll(match[1]) : -1;
+  }
+  // The "key value" lines a dds_peer writes to its --result file.
+  static std::map<std::string, double> figures(const fs::path& path) {
+    std::map<std::string, double> values;
+    std::ifstream in(path);
+    std::string key;
+    double value = 0;
+    while (in >> key >> value) values[key] = value;
+    return values;
+  }
+  std::vector<std::string> peer(const std::string& mode, const std::vector<std::string>& flags,
+                                const std::string& role = "") const {
+    std::vector<std::string> argv = {INDRIVE_DDS_PEER,  mode,       "--profiles",
+                                     profile_.string(), "--domain", std::to_string(domain_)};
+    argv.insert(argv.end(), flags.begin(), flags.end());
+    if (!role.empty()) argv.insert(argv.end(), {"--security", security_.string(), "--role", role});
+    return argv;
+  }
+
   std::vector<nlohmann::json> metrics() const {
     return testing::read_metrics(run_dir_ / "metrics.jsonl");
   }
@@ -152,6 +176,7 @@ class TwoHosts : public ::testing::Test {
   fs::path config_;
   fs::path profile_ = testing::source_path("deploy/dds/default.xml");
   std::string discovery_server_;
+  fs::path security_;  // a make_security.sh folder every service process uses, when set
   std::vector<std::unique_ptr<Child>> children_;
 };
 

@@ -8,7 +8,12 @@
 //   dds_peer receive --profiles F --domain D --run-id R --chunks N --result PATH --timeout S
 //     Joins late, checks the snapshot and every chunk against the synthetic generator, counts
 //     drops, and writes its counts to --result once all arrived (exit 0) or at the timeout.
-//   Both take --security DIR --role ROLE to run with DDS Security (a folder of
+//   dds_peer intrude --profiles F --domain D --run-id R --timeout S --result PATH
+//     An outsider of a run (tests/learner/two_host_test.cc): reads every topic for S seconds
+//     and counts the samples it gets, writes a sealed chunk every 100 ms and one snapshot of
+//     version 1000, and records which of its writers could not be made (DDS Security may deny
+//     them) and how many readers its writers matched.
+//   All take --security DIR --role ROLE to run with DDS Security (a folder of
 //   deploy/dds/make_security.sh and the role whose certificate and permissions to use).
 #include <atomic>
 #include <chrono>
@@ -17,6 +22,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <string>
@@ -231,6 +237,79 @@ int receive(const Args& args) {
   return complete ? 0 : 1;
 }
 
+// Counts the valid samples a reader of topic T gets; nullptr when the reader cannot be made.
+template <typename T>
+std::unique_ptr<indrive::dds::Reader<T>> counting_reader(indrive::dds::Participant& participant,
+                                                         std::atomic<int>& count,
+                                                         std::map<std::string, int>& refused) {
+  try {
+    return participant.make_reader<T>([&count](const T&) { count.fetch_add(1); });
+  } catch (const indrive::dds::DdsError&) {
+    refused[std::string(indrive::dds::TopicTraits<T>::kTopic)] = 1;
+    return nullptr;
+  }
+}
+
+template <typename T>
+std::unique_ptr<indrive::dds::Writer<T>> try_writer(indrive::dds::Participant& participant,
+                                                    std::map<std::string, int>& refused) {
+  try {
+    return participant.make_writer<T>();
+  } catch (const indrive::dds::DdsError&) {
+    refused[std::string(indrive::dds::TopicTraits<T>::kTopic)] = 1;
+    return nullptr;
+  }
+}
+
+int intrude(const Args& args) {
+  namespace msg = indrive::msg;
+  indrive::dds::Participant participant(participant_options(args));
+  std::map<std::string, int> refused_readers, refused_writers;
+  std::atomic<int> chunks{0}, snapshots{0}, announces{0}, requests{0}, allowances{0}, results{0},
+      heartbeats{0};
+  auto r1 = counting_reader<msg::TrajectoryChunk>(participant, chunks, refused_readers);
+  auto r2 = counting_reader<msg::PolicySnapshot>(participant, snapshots, refused_readers);
+  auto r3 = counting_reader<msg::SnapshotAnnounce>(participant, announces, refused_readers);
+  auto r4 = counting_reader<msg::SnapshotRequest>(participant, requests, refused_readers);
+  auto r5 = counting_reader<msg::StepAllowance>(participant, allowances, refused_readers);
+  auto r6 = counting_reader<msg::EpisodeResult>(participant, results, refused_readers);
+  auto r7 = counting_reader<msg::Heartbeat>(participant, heartbeats, refused_readers);
+  auto chunk_writer = try_writer<msg::TrajectoryChunk>(participant, refused_writers);
+  auto policy_writer = try_writer<msg::PolicySnapshot>(participant, refused_writers);
+  int chunks_written = 0, snapshots_written = 0;
+  if (policy_writer) {
+    snapshots_written += policy_writer->write(
+        indrive::testing::make_synthetic_snapshot(args.run_id, 1000, std::size_t{1} << 20));
+  }
+  int chunk_matches = 0, policy_matches = 0;
+  const auto end = Clock::now() + std::chrono::seconds(args.timeout_s);
+  for (std::uint64_t seq = 0; Clock::now() < end; ++seq) {
+    if (chunk_writer) {
+      chunks_written += chunk_writer->write(
+          indrive::testing::make_synthetic_chunk(args.run_id, 7, seq, 16, 32, 32));
+      chunk_matches = std::max(chunk_matches, chunk_writer->matched());
+    }
+    if (policy_writer) policy_matches = std::max(policy_matches, policy_writer->matched());
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  std::ofstream result(args.result);
+  result << "read_trajectory " << chunks << "\n"
+         << "read_policy " << snapshots << "\n"
+         << "read_policy_announce " << announces << "\n"
+         << "read_snapshot_request " << requests << "\n"
+         << "read_allowance " << allowances << "\n"
+         << "read_episode_result " << results << "\n"
+         << "read_heartbeat " << heartbeats << "\n"
+         << "chunks_written " << chunks_written << "\n"
+         << "snapshots_written " << snapshots_written << "\n"
+         << "trajectory_readers_matched " << chunk_matches << "\n"
+         << "policy_readers_matched " << policy_matches << "\n"
+         << "trajectory_writer_refused " << refused_writers["indrive/trajectory"] << "\n"
+         << "policy_writer_refused " << refused_writers["indrive/policy"] << "\n"
+         << "readers_refused " << refused_readers.size() << "\n";
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -238,7 +317,8 @@ int main(int argc, char** argv) {
     const Args args = parse_args(argc, argv);
     if (args.mode == "publish") return publish(args);
     if (args.mode == "receive") return receive(args);
-    throw std::invalid_argument("mode must be publish or receive, not " + args.mode);
+    if (args.mode == "intrude") return intrude(args);
+    throw std::invalid_argument("mode must be publish, receive or intrude, not " + args.mode);
   } catch (const std::exception& error) {
     INDRIVE_LOG(kError, "peer") << error.what();
     return 2;

@@ -171,10 +171,12 @@ TEST(DdsSecurityFiles, GovernanceAdmitsOnlyAuthenticatedEncryptedParticipants) {
   const auto rule = document.child("dds").child("domain_access_rules").child("domain_rule");
   EXPECT_STREQ(rule.child_value("allow_unauthenticated_participants"), "false");
   EXPECT_STREQ(rule.child_value("enable_join_access_control"), "true");
-  for (const char* kind :
-       {"discovery_protection_kind", "liveliness_protection_kind", "rtps_protection_kind"}) {
+  for (const char* kind : {"discovery_protection_kind", "liveliness_protection_kind"}) {
     EXPECT_STREQ(rule.child_value(kind), "ENCRYPT") << kind;
   }
+  // Submessages and payloads are encrypted per topic below; the outer RTPS encryption is off
+  // because Fast DDS 2.9 aborts when it grows a full message (make_security.sh says more).
+  EXPECT_STREQ(rule.child_value("rtps_protection_kind"), "NONE");
   const auto topic = rule.child("topic_access_rules").child("topic_rule");
   EXPECT_STREQ(topic.child_value("topic_expression"), "indrive/*");
   EXPECT_STREQ(topic.child_value("enable_read_access_control"), "true");
