@@ -720,6 +720,7 @@ struct Learner::Impl {
                              {"snapshots_published", stats.snapshots_published},
                              {"snapshot_requests", stats.snapshot_requests},
                              {"chunks", stats.chunks},
+                             {"replay_actors", next_seq.size()},
                              {"dropped_chunks", drops.dropped()},
                              {"dropped_wrong_run", drops.count(dds::DropReason::kWrongRun)},
                              {"dropped_bad_checksum", drops.count(dds::DropReason::kBadChecksum)},

@@ -287,5 +287,41 @@ TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExi
   EXPECT_LE(metrics["episode_length_last20"].get<double>(), 151.0) << metrics.dump();
 }
 
+// --check-config checks each program's DDS Security files before anything starts: a good
+// folder is named with the role it runs as; a certificate of another CA fails with the file's
+// name, and nothing is left running.
+TEST(CheckConfig, SecurityFilesAreCheckedForTheProgramsRole) {
+  testing::TempDir dir("indrive-check-config");
+  const fs::path security = dir.path() / "security";
+  testing::make_security_folder(security);
+  const fs::path config = dir.path() / "c.yaml";
+  std::ofstream(config) << "preset: tiny\n";
+  const std::string bin = INDRIVE_BIN_DIR;
+  auto check = [&](const std::string& program, const std::string& extra, std::string& output) {
+    return testing::run_command(bin + "/" + program + " --config '" + config.string() +
+                                    "' --run-dir '" + (dir.path() / "runs/r").string() +
+                                    "' --dds-security '" + security.string() + "' " + extra +
+                                    " --check-config 2>&1",
+                                output);
+  };
+  std::string output;
+  EXPECT_EQ(check("indrive-learner", "", output), 0) << output;
+  EXPECT_NE(output.find("DDS Security as learner from"), std::string::npos) << output;
+  EXPECT_EQ(check("indrive-actor", "", output), 0) << output;
+  EXPECT_NE(output.find("DDS Security as actor from"), std::string::npos) << output;
+  EXPECT_EQ(check("indrive-actor", "--evaluate", output), 0) << output;
+  EXPECT_NE(output.find("DDS Security as evaluator from"), std::string::npos) << output;
+
+  // The actor's certificate replaced by the learner's: signed by the same CA, but its key and
+  // the permissions' subject no longer match, which the check names.
+  fs::copy_file(security / "learner.pem", security / "actor.pem",
+                fs::copy_options::overwrite_existing);
+  EXPECT_NE(check("indrive-actor", "", output), 0) << output;
+  EXPECT_NE(output.find("actor.key' does not belong to"), std::string::npos) << output;
+  EXPECT_EQ(output.find("config ok"), std::string::npos) << output;
+  // The learner's own files are untouched and still pass.
+  EXPECT_EQ(check("indrive-learner", "", output), 0) << output;
+}
+
 }  // namespace
 }  // namespace indrive

@@ -57,6 +57,7 @@ class TwoHosts : public ::testing::Test {
     auto argv = testing::service_args(program, config_, run_dir_, domain_, profile_, overrides);
     if (!discovery_server_.empty())
       argv.insert(argv.end(), {"--discovery-server", discovery_server_});
+    if (!security_.empty()) argv.insert(argv.end(), {"--dds-security", security_.string()});
     return argv;
   }
   Child& start(const std::vector<std::string>& argv, const std::string& name) {
@@ -286,6 +287,157 @@ TEST_F(TwoHosts, TwentySecondsWithoutTheLinkAreSurvived) {
       static_cast<long long>(last.value("sequence_gaps", 0)),
       static_cast<long long>(last.value("dropped_chunks", 0)),
       count_lines(kUnknownWriterFragments));
+}
+
+// DDS Security across the link: the service on A and every participant on B hold certificates
+// of one run's folder (deploy/dds/make_security.sh), except an outsider without any. The
+// outsider reads no sample of any topic and none of its chunks reaches replay; a participant
+// with an actor's certificate cannot publish a snapshot; an evaluator's certificate gets the
+// newest snapshot, joining late.
+TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
+  make_hosts(/*multicast=*/true);
+  if (IsSkipped()) return;
+  security_ = dir_.path() / "security";
+  testing::make_security_folder(security_);
+  const std::string run_id = "twohost";  // the run directory's name is the run id
+  ProcessWatch watch(dds::ParticipantOptions{.domain_id = domain_,
+                                             .profiles_file = profile_.string(),
+                                             .security_dir = security_.string(),
+                                             .security_role = "observer"});
+  std::vector<Child*> service = {&learner(), &actor(0, false), &actor(1, false)};
+  ASSERT_TRUE(wait_until(150s, [&] {
+    return watch.min_newest_chunk_version({0, 1}) >= 2 && watch.newest_snapshot() >= 4;
+  })) << logs();
+
+  // On B: an outsider with no certificate (chunks as actor 7), and a participant with an actor's
+  // certificate (chunks as actor 8) that also tries to publish a snapshot; both would publish
+  // snapshot version 1000. Their chunks are synthetic (16 steps of 32x32 frames) with the run's
+  // id: what reaches the learner is dropped as bad_shape, named in its log.
+  const fs::path outsider_result = dir_.path() / "outsider.txt";
+  const fs::path actor_result = dir_.path() / "actor-certificate.txt";
+  const std::vector<std::string> flags = {"--run-id", run_id, "--timeout", "20"};
+  auto outsider_flags = flags, actor_flags = flags;
+  outsider_flags.insert(outsider_flags.end(),
+                        {"--result", outsider_result.string(), "--actor-id", "7"});
+  actor_flags.insert(actor_flags.end(), {"--result", actor_result.string(), "--actor-id", "8"});
+  Child& outsider = start(hosts_->on_b(peer("intrude", outsider_flags)), "outsider-on-b");
+  Child& actor_certificate =
+      start(hosts_->on_b(peer("intrude", actor_flags, "actor")), "actor-certificate-on-b");
+
+  const std::uint64_t newest_at_join = watch.newest_snapshot();
+  const auto joined = testing::SteadyClock::now();
+  Child& remote = evaluator({"eval.wait_for_done=false", "eval.towns=town01"});
+  ASSERT_TRUE(wait_until(120s, [&] { return evaluated("evaluator-on-b").first > 0; })) << logs();
+  const double evaluator_s = testing::seconds_since(joined);
+  EXPECT_GE(evaluated("evaluator-on-b").first, newest_at_join) << logs();
+
+  EXPECT_EQ(outsider.wait(60s), 0) << logs();
+  EXPECT_EQ(actor_certificate.wait(60s), 0) << logs();
+  auto outsider_saw = figures(outsider_result);
+  auto actor_saw = figures(actor_result);
+  for (const char* topic :
+       {"read_trajectory", "read_policy", "read_policy_announce", "read_snapshot_request",
+        "read_allowance", "read_episode_result", "read_heartbeat"}) {
+    EXPECT_EQ(outsider_saw[topic], 0) << topic;
+  }
+  EXPECT_GT(outsider_saw["chunks_written"], 0);  // it did try
+  EXPECT_EQ(outsider_saw["trajectory_readers_matched"], 0);
+  EXPECT_EQ(outsider_saw["policy_readers_matched"], 0);
+  // The actor's permissions let it write chunks but not snapshots: the local access control
+  // refuses the policy writer.
+  EXPECT_EQ(actor_saw["policy_writer_refused"], 1);
+  EXPECT_EQ(actor_saw["trajectory_writer_refused"], 0);
+  EXPECT_GT(actor_saw["read_policy"], 0);  // an actor reads snapshots
+  // No snapshot of the intruders' version reached anyone. The secure observer saw chunks of the
+  // actor certificate (8), so it would have seen the outsider's (7) had they crossed.
+  EXPECT_LT(watch.newest_snapshot(), 1000u);
+  int outsider_chunks = 0, certified_chunks = 0;
+  for (const auto& chunk : watch.chunks()) {
+    outsider_chunks += chunk.actor_id == 7u;
+    certified_chunks += chunk.actor_id == 8u;
+  }
+  EXPECT_EQ(outsider_chunks, 0);
+  EXPECT_GT(certified_chunks, 0);
+
+  remote.signal(SIGTERM);
+  EXPECT_EQ(remote.wait(30s), 0) << logs();
+  for (Child* child : service) child->signal(SIGTERM);
+  for (Child* child : service) EXPECT_EQ(child->wait(60s), 0) << logs();
+  const auto lines = metrics();
+  ASSERT_FALSE(lines.empty());
+  // Replay holds the two actors' chunks and nothing else. The learner heard the certified
+  // peer's chunks (and dropped them for their shape), never the outsider's.
+  EXPECT_EQ(lines.back().value("replay_actors", -1), 2) << lines.back().dump();
+  const std::string learner_log = testing::slurp(dir_.path() / "learner.log");
+  EXPECT_EQ(learner_log.find("of actor 7 "), std::string::npos) << logs();
+  EXPECT_NE(learner_log.find("of actor 8 "), std::string::npos) << logs();
+  EXPECT_EQ(lines.back().value("dropped_chunks", -1), lines.back().value("dropped_bad_shape", -2));
+  std::printf(
+      "[figures] DDS Security across the link: evaluator on B had snapshot v%llu (newest at its "
+      "start v%llu) %.2f s after it started; outsider without certificate: %.0f chunks written, "
+      "%.0f samples read of 7 topics, %.0f readers matched; actor certificate: policy writer "
+      "refused %.0f, %.0f snapshots read, %d chunks seen by the observer; learner: %lld chunks "
+      "from %lld actors in replay, %lld dropped\n",
+      static_cast<unsigned long long>(evaluated("evaluator-on-b").first),
+      static_cast<unsigned long long>(newest_at_join), evaluator_s, outsider_saw["chunks_written"],
+      outsider_saw["read_trajectory"] + outsider_saw["read_policy"] +
+          outsider_saw["read_policy_announce"] + outsider_saw["read_snapshot_request"] +
+          outsider_saw["read_allowance"] + outsider_saw["read_episode_result"] +
+          outsider_saw["read_heartbeat"],
+      outsider_saw["trajectory_readers_matched"] + outsider_saw["policy_readers_matched"],
+      actor_saw["policy_writer_refused"], actor_saw["read_policy"], certified_chunks,
+      static_cast<long long>(lines.back().value("chunks", 0)),
+      static_cast<long long>(lines.back().value("replay_actors", 0)),
+      static_cast<long long>(lines.back().value("dropped_chunks", 0)));
+}
+
+// What DDS Security costs across the link: a publisher on A writes a 10 MB snapshot, then 1,000
+// chunks once a receiver on B joins late; the same transfer runs without and with security
+// (the publisher as a learner allowed to write chunks too, the receiver as an observer). Both
+// must deliver everything; the figures are printed, not asserted (speed is a benchmark's job).
+TEST_F(TwoHosts, WhatSecurityCostsAcrossTheLink) {
+  make_hosts(/*multicast=*/true);
+  if (IsSkipped()) return;
+  const fs::path folder = dir_.path() / "security";
+  testing::make_security_folder(folder);
+  testing::allow_publishing(folder, "learner", "indrive/trajectory");
+  std::map<std::string, std::map<std::string, double>> sent, received;
+  for (const bool secure : {false, true}) {
+    const std::string label = secure ? "secure" : "plain";
+    security_ = secure ? folder : fs::path();
+    const fs::path ready = dir_.path() / (label + "-ready");
+    const fs::path sent_file = dir_.path() / (label + "-sent.txt");
+    const fs::path received_file = dir_.path() / (label + "-received.txt");
+    const std::string run_id = "cost-" + label;
+    Child& publisher = start(hosts_->on_a(peer("publish",
+                                               {"--run-id", run_id, "--ready", ready.string(),
+                                                "--result", sent_file.string(), "--timeout", "60"},
+                                               secure ? "learner" : "")),
+                             label + "-publisher-on-a");
+    ASSERT_TRUE(wait_until(30s, [&] { return fs::exists(ready); })) << logs();
+    Child& receiver = start(
+        hosts_->on_b(peer(
+            "receive", {"--run-id", run_id, "--result", received_file.string(), "--timeout", "60"},
+            secure ? "observer" : "")),
+        label + "-receiver-on-b");
+    EXPECT_EQ(receiver.wait(90s), 0) << logs();
+    EXPECT_EQ(publisher.wait(30s), 0) << logs();
+    sent[label] = figures(sent_file);
+    received[label] = figures(received_file);
+    EXPECT_EQ(received[label]["snapshot_ok"], 1) << label;
+    EXPECT_EQ(received[label]["chunks_ok"], 1000) << label;
+    EXPECT_EQ(sent[label]["acked"], 1) << label;
+  }
+  for (const char* label : {"plain", "secure"}) {
+    auto& in = received[label];
+    auto& out = sent[label];
+    std::printf(
+        "[figures] across the link, %s: 10 MB snapshot at the late receiver %.2f s after its "
+        "start (participant %.2f s); %.1f MB of chunks received in %.2f s = %.0f MB/s; "
+        "publisher sent and acknowledged at %.0f MB/s\n",
+        label, in["snapshot_s"], in["participant_s"], out["wire_mb"], in["chunk_s"],
+        out["wire_mb"] / std::max(in["chunk_s"], 1e-9), out["wire_mb_per_s"]);
+  }
 }
 
 }  // namespace

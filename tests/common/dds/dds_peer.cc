@@ -8,11 +8,12 @@
 //   dds_peer receive --profiles F --domain D --run-id R --chunks N --result PATH --timeout S
 //     Joins late, checks the snapshot and every chunk against the synthetic generator, counts
 //     drops, and writes its counts to --result once all arrived (exit 0) or at the timeout.
-//   dds_peer intrude --profiles F --domain D --run-id R --timeout S --result PATH
+//   dds_peer intrude --profiles F --domain D --run-id R --timeout S --result PATH [--actor-id N]
 //     An outsider of a run (tests/learner/two_host_test.cc): reads every topic for S seconds
-//     and counts the samples it gets, writes a sealed chunk every 100 ms and one snapshot of
-//     version 1000, and records which of its writers could not be made (DDS Security may deny
-//     them) and how many readers its writers matched.
+//     and counts the samples it gets from others, writes a sealed chunk as actor N (default 7)
+//     every 100 ms and one snapshot of version 1000, and records which of its writers could not
+//     be made (DDS Security may deny them) and how many readers of other participants its
+//     writers matched. Its own readers, which also match its own writers, are counted out.
 //   All take --security DIR --role ROLE to run with DDS Security (a folder of
 //   deploy/dds/make_security.sh and the role whose certificate and permissions to use).
 #include <atomic>
@@ -20,6 +21,7 @@
 #include <condition_variable>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -43,6 +45,7 @@ struct Args {
   int chunks = 1000;
   int snapshot_mb = 10;
   int timeout_s = 45;
+  int actor_id = 7;
 };
 
 Args parse_args(int argc, char** argv) {
@@ -71,6 +74,8 @@ Args parse_args(int argc, char** argv) {
       args.snapshot_mb = std::stoi(value);
     else if (flag == "--timeout")
       args.timeout_s = std::stoi(value);
+    else if (flag == "--actor-id")
+      args.actor_id = std::stoi(value);
     else
       throw std::invalid_argument("unknown flag " + flag);
   }
@@ -237,13 +242,17 @@ int receive(const Args& args) {
   return complete ? 0 : 1;
 }
 
-// Counts the valid samples a reader of topic T gets; nullptr when the reader cannot be made.
+// Counts the samples a reader of topic T gets that `own` does not call its own; nullptr when
+// the reader cannot be made.
 template <typename T>
-std::unique_ptr<indrive::dds::Reader<T>> counting_reader(indrive::dds::Participant& participant,
-                                                         std::atomic<int>& count,
-                                                         std::map<std::string, int>& refused) {
+std::unique_ptr<indrive::dds::Reader<T>> counting_reader(
+    indrive::dds::Participant& participant, std::atomic<int>& count,
+    std::map<std::string, int>& refused,
+    std::function<bool(const T&)> own = [](const T&) { return false; }) {
   try {
-    return participant.make_reader<T>([&count](const T&) { count.fetch_add(1); });
+    return participant.make_reader<T>([&count, own](const T& sample) {
+      if (!own(sample)) count.fetch_add(1);
+    });
   } catch (const indrive::dds::DdsError&) {
     refused[std::string(indrive::dds::TopicTraits<T>::kTopic)] = 1;
     return nullptr;
@@ -267,8 +276,13 @@ int intrude(const Args& args) {
   std::map<std::string, int> refused_readers, refused_writers;
   std::atomic<int> chunks{0}, snapshots{0}, announces{0}, requests{0}, allowances{0}, results{0},
       heartbeats{0};
-  auto r1 = counting_reader<msg::TrajectoryChunk>(participant, chunks, refused_readers);
-  auto r2 = counting_reader<msg::PolicySnapshot>(participant, snapshots, refused_readers);
+  const auto own_id = static_cast<std::uint32_t>(args.actor_id);
+  auto r1 = counting_reader<msg::TrajectoryChunk>(
+      participant, chunks, refused_readers,
+      [own_id](const msg::TrajectoryChunk& chunk) { return chunk.actor_id() == own_id; });
+  auto r2 = counting_reader<msg::PolicySnapshot>(
+      participant, snapshots, refused_readers,
+      [](const msg::PolicySnapshot& snapshot) { return snapshot.version() == 1000; });
   auto r3 = counting_reader<msg::SnapshotAnnounce>(participant, announces, refused_readers);
   auto r4 = counting_reader<msg::SnapshotRequest>(participant, requests, refused_readers);
   auto r5 = counting_reader<msg::StepAllowance>(participant, allowances, refused_readers);
@@ -286,7 +300,7 @@ int intrude(const Args& args) {
   for (std::uint64_t seq = 0; Clock::now() < end; ++seq) {
     if (chunk_writer) {
       chunks_written += chunk_writer->write(
-          indrive::testing::make_synthetic_chunk(args.run_id, 7, seq, 16, 32, 32));
+          indrive::testing::make_synthetic_chunk(args.run_id, own_id, seq, 16, 32, 32));
       chunk_matches = std::max(chunk_matches, chunk_writer->matched());
     }
     if (policy_writer) policy_matches = std::max(policy_matches, policy_writer->matched());
@@ -302,8 +316,8 @@ int intrude(const Args& args) {
          << "read_heartbeat " << heartbeats << "\n"
          << "chunks_written " << chunks_written << "\n"
          << "snapshots_written " << snapshots_written << "\n"
-         << "trajectory_readers_matched " << chunk_matches << "\n"
-         << "policy_readers_matched " << policy_matches << "\n"
+         << "trajectory_readers_matched " << chunk_matches - (r1 ? 1 : 0) << "\n"
+         << "policy_readers_matched " << policy_matches - (r2 ? 1 : 0) << "\n"
          << "trajectory_writer_refused " << refused_writers["indrive/trajectory"] << "\n"
          << "policy_writer_refused " << refused_writers["indrive/policy"] << "\n"
          << "readers_refused " << refused_readers.size() << "\n";
