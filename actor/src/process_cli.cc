@@ -24,7 +24,7 @@ std::string discovery_summary(const ServiceConfig& config) {
 // throws naming the bad file; "" without security.
 std::string security_summary(const ServiceConfig& config, const std::string& own_role) {
   const dds::ParticipantOptions options = config.participant_options(own_role);
-  if (options.security_dir.empty()) return "";
+  if (options.security_dir.empty() || own_role.empty()) return "";
   dds::check_security_files(options.security_dir, options.security_role);
   return ", DDS Security as " + options.security_role + " from " + options.security_dir +
          " (certificate, key, permissions and governance checked)";

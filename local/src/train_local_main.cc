@@ -41,6 +41,12 @@ int main(int argc, char** argv) {
     if (!route.empty()) options.overrides.push_back("env.route=" + route);
     const auto& stop = indrive::actor::install_stop_signals();
     const auto config = indrive::actor::ServiceConfig::resolve(options);
+    if (options.check_only) {
+      // The local trainer runs no DDS participant: its summary names the profiles it would
+      // resolve, but no security role is checked.
+      std::printf("%s\n", indrive::actor::check_summary(config, "").c_str());
+      return 0;
+    }
     if (evaluate_episodes > 0) {
       if (route.empty()) route = config.config().get<std::string>("env.route");
       if (route.empty()) route = "straight";

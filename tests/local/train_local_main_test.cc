@@ -1,5 +1,6 @@
 // indrive-train-local as a process: SIGTERM saves a checkpoint and exits 0, a second start
-// resumes it, --evaluate-episodes scores the checkpoint, and a bad key fails with a message.
+// resumes it, --evaluate-episodes scores the checkpoint, a bad key fails with a message, and
+// --check-config only checks.
 #include <gtest/gtest.h>
 #include <signal.h>
 
@@ -114,6 +115,21 @@ TEST(TrainLocalMainTest, BadKeyAndMissingCheckpointFailWithAMessage) {
             1);
   EXPECT_NE(testing::slurp(eval_log).find("no checkpoint"), std::string::npos)
       << testing::slurp(eval_log);
+}
+
+// --check-config resolves the configuration, prints its summary and exits without training (it
+// once started a run that trained until stopped): no metrics, no checkpoint.
+TEST(TrainLocalMainTest, CheckConfigPrintsASummaryAndTrainsNothing) {
+  testing::TempDir dir;
+  const fs::path run_dir = dir.path() / "runs" / "checked";
+  const fs::path log = dir.path() / "check.log";
+  // The run has no budget (0): only --check-config can make it end by itself.
+  EXPECT_EQ(testing::Child(command(run_dir, {"--check-config"}), log, kOneThread).wait(60s), 0)
+      << testing::slurp(log);
+  EXPECT_NE(testing::slurp(log).find("config ok: run 'checked', preset tiny"), std::string::npos)
+      << testing::slurp(log);
+  EXPECT_FALSE(fs::exists(run_dir / "metrics.jsonl"));
+  EXPECT_FALSE(fs::exists(run_dir / "checkpoints"));
 }
 
 }  // namespace
