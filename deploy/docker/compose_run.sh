@@ -168,7 +168,7 @@ say "run finished in $run_s s; exit codes:$codes"
 report_log=$("$engine" run --rm -v "$runs_dir:/runs" "$image" \
   indrive report "/runs/$run_id" --out "/runs/$run_id" 2>&1) || die "indrive report failed: $report_log"
 [ -f "$run/report.md" ] || die "no report at $run/report.md"
-sed -n '/^## /,$p' "$run/report.md" | head -20
+sed -n "/^## /,\$p" "$run/report.md" | head -40
 say "image build seconds $build_s"
 say "compose run seconds $run_s"
 say "report $run/report.md"
