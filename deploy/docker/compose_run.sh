@@ -40,7 +40,7 @@ Engine: podman with podman-compose (or `podman compose`), else docker with `dock
 INDRIVE_CONTAINER_ENGINE=podman|docker chooses. With podman, CONTAINERS_CONF defaults to
 deploy/docker/containers.conf (runc, ulimits a sandboxed kernel accepts).
 Exit status: 0 when the run finished and the report exists; 1 otherwise; 3 when no container
-engine is installed.
+engine is installed or it does not answer.
 EOF
 }
 while [ $# -gt 0 ]; do
@@ -71,6 +71,11 @@ if [ -z "$engine" ]; then
   fi
 fi
 command -v "$engine" >/dev/null || { echo "compose_run: $engine is not installed" >&2; exit 3; }
+if ! "$engine" info >/dev/null 2>&1; then
+  echo "compose_run: '$engine info' fails: is its service running (docker) or its set-up" \
+       "complete?" >&2
+  exit 3
+fi
 if [ "$engine" = podman ]; then
   export CONTAINERS_CONF=${CONTAINERS_CONF:-$root/deploy/docker/containers.conf}
   if command -v podman-compose >/dev/null; then compose=(podman-compose)
