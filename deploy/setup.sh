@@ -75,9 +75,10 @@ build() {
 }
 
 run_tests() {
-  # unit + integration + smoke; benchmarks (label bench) run only on request: ctest -L bench
+  # unit + integration + smoke; benchmarks (label bench), the long soak (soak) and the real
+  # containers (container: podman or docker, minutes) run only on request: ctest -L bench
   say "running tests (unit, integration, smoke)"
-  ctest --test-dir "$build_dir" -LE 'bench|soak' --output-on-failure -j "$(nproc)" --timeout 600
+  ctest --test-dir "$build_dir" -LE 'bench|soak|container' --output-on-failure -j "$(nproc)" --timeout 600
   # Every fuzz target for a few seconds, replaying its committed regression inputs first. The
   # seed is fixed so that a test run tries the same mutations each time; finding new bugs is
   # the long run's job (deploy/fuzz.sh run --seconds 600, a new seed each time).

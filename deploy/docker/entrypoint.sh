@@ -39,7 +39,14 @@ resolve() {
 if [ "${1:-}" = "discovery-server" ]; then
   own=$(resolve "$(cat /etc/hostname)")
   echo "entrypoint: discovery server on $own:$port"
-  exec fastdds discovery -i 0 -l "$own" -p "$port"
+  # Not exec'd: `fastdds` dies of SIGTERM (exit 143) when compose stops it; a stop asked for is
+  # a clean end (0), while a server that fails on its own still gives its own exit code.
+  fastdds discovery -i 0 -l "$own" -p "$port" &
+  server_pid=$!
+  trap 'kill -TERM "$server_pid" 2>/dev/null; wait "$server_pid" || true; exit 0' TERM INT
+  status=0
+  wait "$server_pid" || status=$?
+  exit "$status"
 fi
 
 if [ -n "$server" ]; then

@@ -226,7 +226,7 @@ TEST_F(InstalledTest, DiscoveryServerCommandIsAvailable) {
   const Output help = run("fastdds discovery -h");
   EXPECT_EQ(help.status, 0) << help.text;
   const std::string entrypoint = slurp(share() / "deploy/docker/entrypoint.sh");
-  EXPECT_THAT(entrypoint, HasSubstr("exec fastdds discovery -i 0 -l"));
+  EXPECT_THAT(entrypoint, HasSubstr("fastdds discovery -i 0 -l"));
 }
 
 // Packages named in the Dockerfile's runtime stage (the last FROM).
