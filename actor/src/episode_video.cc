@@ -10,11 +10,7 @@ namespace indrive::actor {
 
 std::filesystem::path episode_video_path(const std::filesystem::path& videos_dir,
                                          const EpisodeSpec& spec) {
-  std::string town = std::filesystem::path(spec.town).stem().string();
-  if (town.empty()) town = spec.town;
-  for (char& c : town) {
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-') c = '_';
-  }
+  const std::string town = town_file_label(spec.town);
   return videos_dir / ("eval-" + town + "-" + spec.route + "-" + std::to_string(spec.density) +
                        "-" + std::to_string(spec.episode) + ".mp4");
 }

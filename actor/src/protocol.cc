@@ -1,6 +1,8 @@
 #include "indrive/actor/protocol.h"
 
 #include <algorithm>
+#include <cctype>
+#include <filesystem>
 #include <set>
 #include <stdexcept>
 
@@ -70,6 +72,15 @@ std::vector<EpisodeSpec> ProtocolGrid::episodes_for(int index, int count) const 
     if (episode.global_index % count == index) mine.push_back(std::move(episode));
   }
   return mine;
+}
+
+std::string town_file_label(const std::string& town) {
+  std::string label = std::filesystem::path(town).stem().string();
+  if (label.empty()) label = town;
+  for (char& c : label) {
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-') c = '_';
+  }
+  return label.empty() ? "town" : label;
 }
 
 }  // namespace indrive::actor

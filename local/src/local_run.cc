@@ -387,7 +387,8 @@ EvaluationSummary evaluate_locally(const actor::ServiceConfig& config, const std
 
   // As in the evaluator, episodes end at the route's own step budget (below).
   env::Env env(actor::protocol_env_config(config.env()));
-  EpisodeCsvWriter csv(run.eval() / ("local-" + town + "-" + route + ".csv"));
+  EpisodeCsvWriter csv(run.eval() /
+                       ("local-" + actor::town_file_label(town) + "-" + route + ".csv"));
   EvaluationSummary summary;
   double completion_sum = 0.0, steps_sum = 0.0;
   for (const actor::EpisodeSpec& spec : grid.all_episodes()) {

@@ -69,4 +69,14 @@ TEST(ProtocolGrid, BadGridsAreClearErrors) {
 }
 
 }  // namespace
+// A map given by path names result files by its stem: the local trainer's evaluation once
+// tried to write eval/local-maps/x.xodr-straight.csv for env.town=maps/x.xodr.
+TEST(TownFileLabel, BuiltInNamesStayAndPathsBecomeTheirStem) {
+  EXPECT_EQ(town_file_label("town01"), "town01");
+  EXPECT_EQ(town_file_label("maps/x.xodr"), "x");
+  EXPECT_EQ(town_file_label("../my town.net.xml"), "my_town_net");
+  EXPECT_EQ(town_file_label("/"), "_");
+  EXPECT_EQ(town_file_label(""), "town");
+}
+
 }  // namespace indrive::actor

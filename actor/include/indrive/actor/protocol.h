@@ -53,4 +53,9 @@ struct ProtocolGrid {
   int size() const;
 };
 
+// A town as part of a file name (result CSVs, videos): a built-in town's name as it is, a map
+// given by path its file's stem with anything but letters, digits, '_' and '-' made '_'
+// ("maps/x.xodr" -> "x", "../my town.net.xml" -> "my_town_net").
+std::string town_file_label(const std::string& town);
+
 }  // namespace indrive::actor
