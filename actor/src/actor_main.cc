@@ -4,20 +4,20 @@
 #include <cstdio>
 #include <stdexcept>
 
-#include "indrive/actor/eval_policy.h"
 #include "indrive/actor/evaluator.h"
-#include "indrive/actor/process_cli.h"
+#include "indrive/actor/policies.h"
 #include "indrive/actor/training_actor.h"
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
+#include "indrive/service/process_cli.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"indrive-actor: steps one environment for the learner, or evaluates snapshots"};
-  indrive::actor::ServiceOptions options;
+  indrive::service::ServiceOptions options;
   std::string log_level = "info";
   int id = 0;
   int of = 1;
   bool evaluate = false;
-  indrive::actor::add_service_options(app, options, log_level);
+  indrive::service::add_service_options(app, options, log_level);
   app.add_option("--id", id, "actor id (training) or evaluator index")->check(CLI::Range(0, 1023));
   app.add_option("--of", of, "number of evaluators sharing the protocol grid")
       ->check(CLI::Range(1, 1024));
@@ -35,7 +35,7 @@ int main(int argc, char** argv) {
 
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
-    const auto& stop = indrive::actor::install_stop_signals();
+    const auto& stop = indrive::service::install_stop_signals();
     if (!evaluate && (!policy.empty() || !snapshot.empty() || continuous)) {
       throw std::invalid_argument("--policy, --snapshot and --continuous need --evaluate");
     }
@@ -49,10 +49,10 @@ int main(int argc, char** argv) {
       if (policy.empty()) options.overrides.push_back("eval.policy=snapshot");
     }
     if (continuous) options.overrides.push_back("eval.continuous=true");
-    const auto config = indrive::actor::ServiceConfig::resolve(options);
+    const auto config = indrive::service::ServiceConfig::resolve(options);
     if (options.check_only) {
       const char* role = evaluate ? "evaluator" : "actor";
-      std::printf("%s\n", indrive::actor::check_summary(config, role).c_str());
+      std::printf("%s\n", indrive::service::check_summary(config, role).c_str());
       return 0;
     }
     if (evaluate) {

@@ -1,7 +1,7 @@
 #include "indrive/actor/chunk_builder.h"
 
-#include "indrive/common/check.h"
-#include "indrive/common/dds_messages.h"
+#include "indrive/basics/check.h"
+#include "indrive/dds/messages.h"
 
 namespace indrive::actor {
 

@@ -2,9 +2,26 @@
 
 #include <stdexcept>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 
 namespace indrive::actor {
+
+env::EnvConfig env_config(const service::ServiceConfig& service) {
+  return env_config(service, service.agent());
+}
+
+env::EnvConfig env_config(const service::ServiceConfig& service, const agent::AgentConfig& agent) {
+  const config::Config& config = service.config();
+  env::EnvConfig env;
+  env.town = config.get<std::string>("env.town");
+  env.sumo.mode = config.get<std::string>("env.sumo_mode") == "libtraci" ? env::SumoMode::kLibtraci
+                                                                         : env::SumoMode::kLibsumo;
+  env.camera.width = agent.world_model.image;
+  env.camera.height = agent.world_model.image;
+  env.events.time_limit_steps = config.get<int>("env.time_limit_steps");
+  if (agent.phase != agent::Phase::kPretrain) env.task = agent.task;
+  return env;
+}
 
 std::vector<std::string> route_list(const std::string& text) {
   std::vector<std::string> out;
@@ -46,7 +63,7 @@ EnvAdapter::EnvAdapter(env::Env& env, EnvAdapterOptions options)
   }
 }
 
-EnvAdapterOptions EnvAdapter::options_from(const ServiceConfig& config) {
+EnvAdapterOptions EnvAdapter::options_from(const service::ServiceConfig& config) {
   const auto& c = config.config();
   return {.route = c.get<std::string>("env.route"),
           .densities = c.get<std::vector<double>>("env.densities"),

@@ -9,15 +9,18 @@
 #include <stdexcept>
 #include <thread>
 
-#include "indrive/actor/episode_video.h"
-#include "indrive/actor/eval_policy.h"
+#include "indrive/actor/env_adapter.h"
+#include "indrive/actor/policies.h"
+#include "indrive/actor/protocol_episode.h"
+#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/snapshot_file.h"
 #include "indrive/actor/snapshot_inbox.h"
-#include "indrive/common/check.h"
-#include "indrive/common/dds.h"
-#include "indrive/common/dds_security.h"
-#include "indrive/common/episode_csv.h"
-#include "indrive/common/log.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/basics/check.h"
+#include "indrive/basics/episode_csv.h"
+#include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/dds/participant.h"
+#include "indrive/dds/security.h"
 
 namespace indrive::actor {
 namespace {
@@ -37,13 +40,6 @@ std::vector<std::string> split_list(const std::string& text) {
 }
 
 // What one finished episode gives.
-struct EpisodeOutcome {
-  std::uint32_t events = 0;  // the last step's events, time_limit added when the budget ran out
-  int steps = 0;
-  double route_completion = 0.0;
-  double episode_return = 0.0;
-};
-
 // Appends learning-curve rows, writing the header first when the file is new.
 class CurveWriter {
  public:
@@ -90,7 +86,7 @@ ProtocolGrid protocol_grid(const config::Config& config) {
 }
 
 struct Evaluator::Impl {
-  Impl(const ServiceConfig& service, int evaluator_index, int evaluator_count)
+  Impl(const service::ServiceConfig& service, int evaluator_index, int evaluator_count)
       : config(service),
         index(evaluator_index),
         count(evaluator_count),
@@ -140,9 +136,9 @@ struct Evaluator::Impl {
     task = head == PolicyHead::kExploration ? "exploration" : agent_config.task;
 
     if (source == PolicySource::kSnapshot && snapshot_file.empty()) {
-      inbox =
-          std::make_unique<SnapshotInbox>(service.run_id(), architecture_descriptor(agent_config),
-                                          c.get<double>("actor.request_after_s"));
+      inbox = std::make_unique<SnapshotInbox>(service.run_id(),
+                                              service::architecture_descriptor(agent_config),
+                                              c.get<double>("actor.request_after_s"));
       participant = std::make_unique<dds::Participant>(service.participant_options("evaluator"));
       result_writer = participant->make_writer<msg::EpisodeResult>();
       request_writer = participant->make_writer<msg::SnapshotRequest>();
@@ -160,7 +156,7 @@ struct Evaluator::Impl {
             if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
           });
     }
-    env::EnvConfig env_config = protocol_env_config(service.env(agent_config));
+    env::EnvConfig env_config = protocol_env_config(actor::env_config(service, agent_config));
     env_config.town = grid.towns.front();
     env = std::make_unique<env::Env>(env_config);
   }
@@ -246,42 +242,6 @@ struct Evaluator::Impl {
         "snapshot v" + std::to_string(snapshot.version()) + " of run " + config.run_id());
   }
 
-  EpisodeOutcome run_episode(const EpisodeSpec& spec, const std::atomic<bool>& stop,
-                             bool* stopped) {
-    env::StepResult step =
-        env->reset({.town = spec.town,
-                    .route = spec.route,
-                    .density = spec.density,
-                    .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
-                    .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
-    const env::Route* route = env->route();
-    INDRIVE_CHECK(route != nullptr) << "an evaluation reset must place the ego on its route";
-    const config::Config& c = config.config();
-    const int budget = route_step_budget(route->length_m(), c.get<double>("eval.budget_speed_mps"),
-                                         c.get<double>("eval.budget_slack"));
-    policy->begin(*env, spec);
-    std::optional<EpisodeVideo> video;
-    if (spec.episode < c.get<int>("eval.video_episodes")) {
-      video.emplace(episode_video_path(config.run_dir() / "videos", spec), *env, spec, budget);
-      video->add(*env, step);
-    }
-    EpisodeOutcome outcome;
-    while (!step.is_last && step.step < budget && !stop.load()) {
-      step = env->step(policy->act(*env, step));
-      outcome.episode_return += step.reward.value_or(0.0);
-      if (video) video->add(*env, step);
-    }
-    *stopped = !step.is_last && step.step < budget;
-    outcome.events = step.events;
-    const bool budget_ran_out = !step.is_last && !*stopped;
-    if (budget_ran_out) outcome.events |= env::kTimeLimit;
-    outcome.steps = step.step;
-    outcome.route_completion =
-        route_completion(step.route_progress_m, route->length_m(), outcome.events);
-    if (video) video->finish(outcome.events, budget_ran_out);
-    return outcome;
-  }
-
   // Runs this evaluator's episodes with the current policy; returns how many finished.
   int run_episodes(const std::atomic<bool>& stop, std::uint64_t version, std::uint64_t env_steps,
                    EpisodeCsvWriter* csv, CurveWriter* curve) {
@@ -289,11 +249,11 @@ struct Evaluator::Impl {
     int done = 0;
     for (const EpisodeSpec& spec : episodes) {
       if (stop.load()) break;
-      bool stopped = false;
-      const EpisodeOutcome outcome = run_episode(spec, stop, &stopped);
-      if (stopped) break;
-      EpisodeRecord record = protocol_record(spec, outcome.events, outcome.steps,
-                                             outcome.route_completion, outcome.episode_return);
+      const EpisodeOutcome outcome = run_protocol_episode(
+          *env, *policy, spec,
+          protocol_episode_options(config.config(), config.run_dir() / "videos"), stop);
+      if (outcome.stopped) break;
+      EpisodeRecord record = protocol_record(spec, outcome);
       record.run_id = config.run_id();
       record.method = method;
       record.eval_kind = config.config().get<std::string>("eval.kind");
@@ -424,7 +384,7 @@ struct Evaluator::Impl {
     return config.run_dir() / "eval" / ("evaluator-" + std::to_string(index) + ".csv");
   }
 
-  const ServiceConfig& config;
+  const service::ServiceConfig& config;
   int index;
   int count;
   agent::AgentConfig agent_config;
@@ -449,7 +409,7 @@ struct Evaluator::Impl {
   std::unique_ptr<env::Env> env;
 };
 
-Evaluator::Evaluator(const ServiceConfig& config, int index, int count)
+Evaluator::Evaluator(const service::ServiceConfig& config, int index, int count)
     : impl_(std::make_unique<Impl>(config, index, count)) {}
 Evaluator::~Evaluator() = default;
 int Evaluator::run(const std::atomic<bool>& stop) { return impl_->run(stop); }

@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 
 namespace indrive::actor {
 

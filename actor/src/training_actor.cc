@@ -8,13 +8,13 @@
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/env_adapter.h"
 #include "indrive/actor/snapshot_inbox.h"
-#include "indrive/common/agent/policy.h"
-#include "indrive/common/check.h"
-#include "indrive/common/dds.h"
-#include "indrive/common/dds_security.h"
-#include "indrive/common/log.h"
-#include "indrive/common/nn/nn.h"
+#include "indrive/agent/policy.h"
+#include "indrive/basics/check.h"
+#include "indrive/basics/log.h"
+#include "indrive/dds/participant.h"
+#include "indrive/dds/security.h"
 #include "indrive/envserver/coverage.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::actor {
 namespace {
@@ -90,15 +90,15 @@ class AllowanceGate {
 }  // namespace
 
 struct TrainingActor::Impl {
-  Impl(const ServiceConfig& service, std::uint32_t actor_id)
+  Impl(const service::ServiceConfig& service, std::uint32_t actor_id)
       : config(service),
         id(actor_id),
         agent_config(service.agent()),
-        env_config(service.env()),
+        env_config(actor::env_config(service)),
         chunk_length(service.config().get<int>("actor.chunk_length")),
         heartbeat_period_s(service.config().get<double>("actor.heartbeat_s")),
         with_rewards(agent_config.phase != agent::Phase::kPretrain),
-        inbox(service.run_id(), architecture_descriptor(agent_config),
+        inbox(service.run_id(), service::architecture_descriptor(agent_config),
               service.config().get<double>("actor.request_after_s")),
         gate(service.run_id()),
         builder({.run_id = service.run_id(),
@@ -130,7 +130,7 @@ struct TrainingActor::Impl {
     INDRIVE_LOG(kInfo, "actor") << "actor " << id << " of run '" << service.run_id()
                                 << "' ready: town " << env_config.town << ", image "
                                 << agent_config.world_model.image << ", architecture '"
-                                << architecture_descriptor(agent_config) << "'";
+                                << service::architecture_descriptor(agent_config) << "'";
   }
 
   ~Impl() { disconnect(); }
@@ -403,7 +403,7 @@ struct TrainingActor::Impl {
     }
   }
 
-  const ServiceConfig& config;
+  const service::ServiceConfig& config;
   std::uint32_t id;
   agent::AgentConfig agent_config;
   env::EnvConfig env_config;
@@ -446,7 +446,7 @@ struct TrainingActor::Impl {
   ActorStats stats;
 };
 
-TrainingActor::TrainingActor(const ServiceConfig& config, std::uint32_t id)
+TrainingActor::TrainingActor(const service::ServiceConfig& config, std::uint32_t id)
     : impl_(std::make_unique<Impl>(config, id)) {}
 TrainingActor::~TrainingActor() = default;
 void TrainingActor::run(const std::atomic<bool>& stop) { impl_->run(stop); }

@@ -11,7 +11,7 @@
 # Every process then runs with `--dds-security OUT_DIR` and picks its own role's files
 # (deploy/dds/README.md, "DDS Security"). ca.key signs everything: keep it on this host.
 #
-# Roles and what their permissions allow (topics of common/include/indrive/common/dds_messages.h):
+# Roles and what their permissions allow (topics of common/dds/include/indrive/dds/messages.h):
 #   learner    publishes policy, policy_announce, allowance, heartbeat;
 #              subscribes trajectory, episode_result, snapshot_request, heartbeat
 #   actor      publishes trajectory, episode_result, heartbeat, snapshot_request;

@@ -8,8 +8,8 @@
 #include <filesystem>
 #include <string>
 
-#include "indrive/common/log.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/deploy/launch.h"
 #include "indrive/deploy/plot.h"
 #include "indrive/deploy/report.h"

@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 
 namespace indrive::deploy {
 namespace fs = std::filesystem;

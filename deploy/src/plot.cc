@@ -14,7 +14,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "indrive/common/run_dir.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/envserver/coverage.h"
 #include "indrive/envserver/town.h"
 

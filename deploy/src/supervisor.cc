@@ -14,7 +14,7 @@
 #include <fstream>
 #include <thread>
 
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 
 namespace indrive::deploy {
 

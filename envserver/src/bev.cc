@@ -6,7 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "camera_geometry.h"
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 
 namespace indrive::env {
 namespace {

@@ -2,7 +2,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 #include "indrive/envserver/bev.h"
 #include "indrive/envserver/camera.h"
 

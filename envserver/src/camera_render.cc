@@ -17,7 +17,7 @@
 #include <limits>
 
 #include "camera_geometry.h"
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 #include "indrive/envserver/camera.h"
 
 namespace indrive::env {

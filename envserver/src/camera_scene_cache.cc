@@ -8,8 +8,8 @@
 #include <sstream>
 
 #include "camera_geometry.h"
-#include "indrive/common/check.h"
-#include "indrive/common/log.h"
+#include "indrive/basics/check.h"
+#include "indrive/basics/log.h"
 #include "indrive/envserver/camera.h"
 
 namespace indrive::env {

@@ -9,8 +9,8 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "indrive/common/check.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/basics/check.h"
+#include "indrive/basics/run_dir.h"
 
 namespace indrive::env {
 

@@ -3,8 +3,8 @@
 #include <chrono>
 #include <cmath>
 
-#include "indrive/common/check.h"
-#include "indrive/common/log.h"
+#include "indrive/basics/check.h"
+#include "indrive/basics/log.h"
 #include "indrive/envserver/scene_build.h"
 
 namespace indrive::env {

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 
 namespace indrive::env {
 namespace {

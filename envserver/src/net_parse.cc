@@ -7,7 +7,7 @@
 #include <sstream>
 #include <string>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 #include "indrive/envserver/net.h"
 #include "net_geometry.h"
 

@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <limits>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 #include "indrive/envserver/net.h"
 #include "net_geometry.h"
 

@@ -13,9 +13,9 @@
 #include <random>
 #include <sstream>
 
-#include "indrive/common/checksum.h"
-#include "indrive/common/data_path.h"
-#include "indrive/common/log.h"
+#include "indrive/basics/checksum.h"
+#include "indrive/basics/data_path.h"
+#include "indrive/basics/log.h"
 #include "indrive/envserver/town.h"
 
 extern char** environ;
@@ -63,7 +63,7 @@ fs::path data_dir(const TownOptions& options) {
   if (!options.data_dir.empty()) return options.data_dir;
   if (auto env = env_or_empty("INDRIVE_ENV_DATA_DIR"); !env.empty()) return env;
   // Otherwise the shared data roots: $INDRIVE_DATA_DIR, an installed share/indrive, the
-  // source tree (indrive/common/data_path.h).
+  // source tree (indrive/basics/data_path.h).
   try {
     return find_data("envserver/data");
   } catch (const DataPathError& error) {

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <limits>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 #include "indrive/envserver/routes.h"
 #include "net_geometry.h"
 

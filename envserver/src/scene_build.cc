@@ -7,7 +7,7 @@
 #include <random>
 #include <set>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 #include "net_geometry.h"
 
 namespace indrive::env {

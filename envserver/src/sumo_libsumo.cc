@@ -8,7 +8,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include "indrive/common/check.h"
+#include "indrive/basics/check.h"
 #include "sumo_clients.h"
 
 #define INDRIVE_SUMO_API libsumo

@@ -4,8 +4,8 @@
 #include <cmath>
 #include <numbers>
 
-#include "indrive/common/check.h"
-#include "indrive/common/log.h"
+#include "indrive/basics/check.h"
+#include "indrive/basics/log.h"
 
 namespace indrive::env {
 namespace {

@@ -5,7 +5,7 @@
 #include <opencv2/imgproc.hpp>
 #include <system_error>
 
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 
 namespace indrive::env {
 

@@ -3,23 +3,23 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 
-#include "indrive/actor/process_cli.h"
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 #include "indrive/learner/learner.h"
+#include "indrive/service/process_cli.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"indrive-learner: trains the agent on the actors' trajectories"};
-  indrive::actor::ServiceOptions options;
+  indrive::service::ServiceOptions options;
   std::string log_level = "info";
-  indrive::actor::add_service_options(app, options, log_level);
+  indrive::service::add_service_options(app, options, log_level);
   CLI11_PARSE(app, argc, argv);
 
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
-    const auto& stop = indrive::actor::install_stop_signals();
-    const auto config = indrive::actor::ServiceConfig::resolve(options);
+    const auto& stop = indrive::service::install_stop_signals();
+    const auto config = indrive::service::ServiceConfig::resolve(options);
     if (options.check_only) {
-      std::printf("%s\n", indrive::actor::check_summary(config, "learner").c_str());
+      std::printf("%s\n", indrive::service::check_summary(config, "learner").c_str());
       return 0;
     }
     indrive::learner::Learner learner(config);

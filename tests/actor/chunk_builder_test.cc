@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-#include "indrive/common/dds_messages.h"
+#include "indrive/dds/messages.h"
 
 namespace indrive::actor {
 namespace {

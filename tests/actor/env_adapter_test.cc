@@ -8,6 +8,10 @@
 #include <random>
 #include <set>
 
+#include "indrive/agent/observation.h"
+#include "indrive/envserver/scene.h"
+#include "testing.h"
+
 namespace indrive::actor {
 namespace {
 
@@ -19,6 +23,47 @@ env::EnvConfig small_env(const std::string& task) {
   config.events.time_limit_steps = 40;
   config.task = task;
   return config;
+}
+
+// The adapter hands camera frames (class ids) to the agent, which colours them itself: both
+// palettes must be the same.
+TEST(EnvAdapterTest, TheAgentsPaletteEqualsTheCameras) {
+  ASSERT_EQ(agent::kNumClasses, env::kNumSemanticClasses);
+  for (int c = 0; c < agent::kNumClasses; ++c) {
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(agent::kPaletteRgb[c][k], env::kPaletteRgb[c][k]) << c;
+  }
+}
+
+TEST(EnvConfigTest, ThePresetSizesTheCameraAndTaskPhasesSetTheTask) {
+  testing::TempDir dir;
+  const auto pretrain =
+      service::ServiceConfig::resolve({.run_dir = dir.path() / "r", .overrides = {"preset=tiny"}});
+  const env::EnvConfig env = env_config(pretrain);
+  EXPECT_EQ(env.camera.width, 32) << "the camera renders the preset's image size";
+  EXPECT_TRUE(env.task.empty()) << "pretraining computes no reward";
+  // The environment of another agent config renders that config's image size.
+  EXPECT_EQ(env_config(pretrain, agent::preset("small")).camera.width, 128);
+
+  const auto task = service::ServiceConfig::resolve(
+      {.run_dir = dir.path() / "r",
+       .overrides = {"agent.phase=finetune", "agent.task=collision_avoidance"}});
+  EXPECT_EQ(env_config(task).task, "collision_avoidance");
+}
+
+// Every shipped config gives an environment, so a renamed env key cannot break a recipe.
+TEST(EnvConfigTest, EveryShippedConfigGivesAnEnvironment) {
+  testing::TempDir dir;
+  int count = 0;
+  for (const auto& entry :
+       std::filesystem::directory_iterator(testing::source_path("deploy/configs"))) {
+    if (entry.path().extension() != ".yaml") continue;
+    SCOPED_TRACE(entry.path().filename().string());
+    const auto config =
+        service::ServiceConfig::resolve({.config_file = entry.path(), .run_dir = dir.path() / "r"});
+    EXPECT_FALSE(env_config(config).town.empty());
+    ++count;
+  }
+  EXPECT_GE(count, 8);
 }
 
 TEST(EnvAdapterTest, FramesRewardsAndEpisodeEndsOfAPretrainingEnv) {

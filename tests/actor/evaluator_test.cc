@@ -13,10 +13,13 @@
 #include <map>
 #include <thread>
 
-#include "indrive/actor/eval_policy.h"
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/dds.h"
-#include "indrive/common/episode_csv.h"
+#include "indrive/actor/env_adapter.h"
+#include "indrive/actor/policies.h"
+#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/snapshot_file.h"
+#include "indrive/agent/agent.h"
+#include "indrive/basics/episode_csv.h"
+#include "indrive/dds/participant.h"
 #include "indrive/deploy/report.h"
 #include "indrive/envserver/env.h"
 #include "testing.h"
@@ -24,9 +27,10 @@
 namespace indrive::actor {
 namespace {
 
-ServiceConfig resolve(const std::filesystem::path& run_dir, std::vector<std::string> overrides) {
+service::ServiceConfig resolve(const std::filesystem::path& run_dir,
+                               std::vector<std::string> overrides) {
   overrides.insert(overrides.begin(), "preset=tiny");
-  return ServiceConfig::resolve({.run_dir = run_dir, .overrides = overrides});
+  return service::ServiceConfig::resolve({.run_dir = run_dir, .overrides = overrides});
 }
 
 // What the test's own replay of one episode gives.
@@ -53,7 +57,7 @@ Replay replay(env::Env& env, const EpisodeSpec& spec, EpisodePolicy& policy) {
 }
 
 // Runs one evaluator (scoped: libsumo holds one simulation per process) and returns its rows.
-std::vector<EpisodeRecord> evaluate(const ServiceConfig& config) {
+std::vector<EpisodeRecord> evaluate(const service::ServiceConfig& config) {
   Evaluator evaluator(config, 0, 1);
   const std::atomic<bool> stop{false};
   EXPECT_EQ(evaluator.run(stop), 0);
@@ -82,7 +86,7 @@ TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
                           .densities = {10},
                           .episodes_per_cell = 2};
   const auto specs = grid.all_episodes();
-  env::EnvConfig env_config = oracle_config.env();
+  env::EnvConfig env_config = actor::env_config(oracle_config);
   env_config.events.time_limit_steps = 1 << 30;
   env::Env env(env_config);
   auto oracle = make_oracle_policy({});
@@ -180,7 +184,7 @@ TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {
   write_snapshot_file(file, agent.snapshot(), agent_config);
   // No DDS: a learner's snapshot would time out after 1 s and return 2. No preset either: the
   // file's header sizes the model and the camera (tiny, 32 px, where the default is cpu).
-  const auto config = ServiceConfig::resolve(
+  const auto config = service::ServiceConfig::resolve(
       {.run_dir = dir.path() / "disag-s1",
        .overrides = {"eval.snapshot_file=" + file.string(), "eval.towns=town02",
                      "eval.routes=straight", "eval.densities=[5]", "eval.episodes_per_cell=2",
@@ -216,7 +220,7 @@ std::vector<std::string> curve_rows(const std::filesystem::path& path) {
 
 // A stand-in learner on DDS: publishes snapshots of one (untrained) agent and heartbeats.
 struct StandInLearner {
-  StandInLearner(const ServiceConfig& config)
+  StandInLearner(const service::ServiceConfig& config)
       : config(config),
         agent_config(config.agent()),
         agent(agent_config),
@@ -231,7 +235,7 @@ struct StandInLearner {
     snapshot.run_id(config.run_id());
     snapshot.version(version);
     snapshot.preset(agent_config.preset);
-    snapshot.architecture(architecture_descriptor(agent_config));
+    snapshot.architecture(service::architecture_descriptor(agent_config));
     snapshot.heads(msg::HEAD_ENCODER | msg::HEAD_RSSM | msg::HEAD_EXPLORATION_ACTOR);
     snapshot.phase(msg::PHASE_PRETRAIN);
     snapshot.env_steps(1000 * version);
@@ -258,7 +262,7 @@ struct StandInLearner {
     announces->write(announce);
   }
 
-  const ServiceConfig& config;
+  const service::ServiceConfig& config;
   agent::AgentConfig agent_config;
   agent::Agent agent;
   dds::Participant participant;
@@ -269,8 +273,8 @@ struct StandInLearner {
 };
 
 // A run evaluated over DDS on a fresh domain: one episode (town02, straight, density 5).
-ServiceConfig one_episode_over_dds(const std::filesystem::path& run_dir,
-                                   std::vector<std::string> overrides) {
+service::ServiceConfig one_episode_over_dds(const std::filesystem::path& run_dir,
+                                            std::vector<std::string> overrides) {
   overrides.insert(overrides.end(),
                    {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
                     "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
@@ -287,7 +291,7 @@ void expect_one_row_of(const std::filesystem::path& run_dir, long long version) 
 
 // Runs one evaluator on `config` in a thread while `drive` plays the learner; returns the
 // evaluator's exit code (-1 when it was still waiting after `drive` and 120 s more).
-int evaluate_beside(const ServiceConfig& config, const std::function<void()>& drive) {
+int evaluate_beside(const service::ServiceConfig& config, const std::function<void()>& drive) {
   std::atomic<bool> stop{false};
   std::atomic<int> code{-1};
   std::thread evaluator_thread([&] {
@@ -443,7 +447,7 @@ TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
 }
 
 // The message of the EvalError constructing an evaluator throws ("" when none).
-std::string setup_error(const ServiceConfig& config) {
+std::string setup_error(const service::ServiceConfig& config) {
   try {
     Evaluator evaluator(config, 0, 1);
   } catch (const EvalError& error) {
@@ -472,9 +476,9 @@ TEST(Evaluator, BadInputsAreClearErrorsBeforeAnythingStarts) {
   EXPECT_NE(message.find("not task_actor"), std::string::npos) << message;
 
   // Sizes chosen against the file's: both values named, and what to do.
-  message = setup_error(
-      ServiceConfig::resolve({.run_dir = dir.path() / "r",
-                              .overrides = {"preset=cpu", "eval.snapshot_file=" + file.string()}}));
+  message = setup_error(service::ServiceConfig::resolve(
+      {.run_dir = dir.path() / "r",
+       .overrides = {"preset=cpu", "eval.snapshot_file=" + file.string()}}));
   EXPECT_NE(message.find("was trained with preset tiny"), std::string::npos) << message;
   EXPECT_NE(message.find("world_model.image=64 (preset 'cpu') where the file has 32"),
             std::string::npos)

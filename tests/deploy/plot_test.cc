@@ -7,7 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
-#include "indrive/common/run_dir.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/envserver/coverage.h"
 #include "indrive/envserver/town.h"
 #include "testing.h"

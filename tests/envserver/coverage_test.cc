@@ -8,7 +8,7 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
-#include "indrive/common/run_dir.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/envserver/town.h"
 #include "testing.h"
 

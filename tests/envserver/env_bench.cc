@@ -12,7 +12,7 @@
 #include <opencv2/core.hpp>
 #include <string>
 
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 #include "indrive/envserver/env.h"
 #include "indrive/envserver/follower.h"
 

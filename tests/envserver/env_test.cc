@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "indrive/common/checksum.h"
+#include "indrive/basics/checksum.h"
 #include "indrive/envserver/follower.h"
 #include "testing.h"
 

@@ -7,10 +7,10 @@
 #include <cstring>
 
 #include "fuzz_support.h"
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/checksum.h"
-#include "indrive/common/nn/serialize.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/agent/agent.h"
+#include "indrive/basics/checksum.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/nn/serialize.h"
 
 namespace {
 

@@ -1,5 +1,5 @@
 // CDR bytes of the wire types, decoded by the type the project registers for each topic
-// (dds_messages.h, GuardedPubSubType over the generated one): the message targets decode fuzz
+// (dds/messages.h, GuardedPubSubType over the generated one): the message targets decode fuzz
 // input exactly as a subscriber does before any project code runs.
 #pragma once
 
@@ -10,7 +10,7 @@
 #include <span>
 #include <vector>
 
-#include "indrive/common/dds_messages.h"
+#include "indrive/dds/messages.h"
 
 namespace indrive::fuzz {
 

@@ -6,8 +6,8 @@
 #include <vector>
 
 #include "fuzz_support.h"
-#include "indrive/actor/service_config.h"
-#include "indrive/common/config.h"
+#include "indrive/basics/config.h"
+#include "indrive/service/run_config.h"
 
 namespace {
 
@@ -30,7 +30,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) { return fuzz::initialize(mak
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string input(fuzz::text(data, size));
   std::string yaml = input;
-  actor::ServiceOptions options;
+  service::ServiceOptions options;
   if (const auto split = input.find("\n--set\n"); split != std::string::npos) {
     yaml = input.substr(0, split);
     std::size_t begin = split + 7;
@@ -44,9 +44,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       fuzz::as_file(reinterpret_cast<const std::uint8_t*>(yaml.data()), yaml.size(), ".yaml");
   options.run_dir = "runs/fuzz";
   fuzz::accept<config::ConfigError, agent::AgentConfigError>([&] {
-    const auto service = actor::ServiceConfig::resolve(options);
+    const auto service = service::ServiceConfig::resolve(options);
     service.agent_choices();
-    service.env();
+    actor::env_config(service);
     service.wire_phase();
   });
   return 0;

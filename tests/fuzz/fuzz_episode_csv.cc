@@ -3,7 +3,7 @@
 #include <cstdint>
 
 #include "fuzz_support.h"
-#include "indrive/common/episode_csv.h"
+#include "indrive/basics/episode_csv.h"
 #include "indrive/deploy/report.h"
 
 namespace {

@@ -3,11 +3,11 @@
 #include <cstdint>
 
 #include "fuzz_support.h"
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/agent/replay.h"
-#include "indrive/common/nn/serialize.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/agent/agent.h"
+#include "indrive/agent/replay.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/learner/learner.h"
+#include "indrive/nn/serialize.h"
 
 namespace {
 

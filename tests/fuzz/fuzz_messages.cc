@@ -9,12 +9,12 @@
 
 #include "fuzz_cdr.h"
 #include "fuzz_support.h"
-#include "indrive/actor/service_config.h"
 #include "indrive/actor/snapshot_inbox.h"
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/agent/policy.h"
-#include "indrive/common/nn/serialize.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/agent/agent.h"
+#include "indrive/agent/policy.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/nn/serialize.h"
+#include "indrive/service/run_config.h"
 
 namespace {
 
@@ -37,7 +37,7 @@ msg::PolicySnapshot real_snapshot() {
   snapshot.run_id("fuzz");
   snapshot.version(7);
   snapshot.preset(config.preset);
-  snapshot.architecture(actor::architecture_descriptor(config));
+  snapshot.architecture(service::architecture_descriptor(config));
   snapshot.heads(msg::HEAD_ENCODER | msg::HEAD_RSSM | msg::HEAD_EXPLORATION_ACTOR);
   snapshot.phase(msg::PHASE_PRETRAIN);
   snapshot.env_steps(1234);
@@ -97,7 +97,7 @@ void make_seeds(const fuzz::fs::path& dir) {
 
 struct Receiver {
   agent::AgentConfig config = fuzz::micro_agent();
-  actor::SnapshotInbox inbox{"fuzz", actor::architecture_descriptor(config), 0.1};
+  actor::SnapshotInbox inbox{"fuzz", service::architecture_descriptor(config), 0.1};
   agent::Policy policy{config};
   EpisodeStats episodes;
   std::uint64_t held = 0;

@@ -2,7 +2,7 @@
 #include <cstdint>
 
 #include "fuzz_support.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/deploy/plot.h"
 
 namespace {

@@ -7,9 +7,9 @@
 #include <cstring>
 
 #include "fuzz_support.h"
-#include "indrive/common/agent/replay.h"
-#include "indrive/common/checksum.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/agent/replay.h"
+#include "indrive/basics/checksum.h"
+#include "indrive/basics/run_dir.h"
 
 namespace {
 

@@ -3,9 +3,9 @@
 #include <cstdint>
 
 #include "fuzz_support.h"
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/agent/policy.h"
-#include "indrive/common/nn/serialize.h"
+#include "indrive/agent/agent.h"
+#include "indrive/agent/policy.h"
+#include "indrive/nn/serialize.h"
 
 namespace {
 

@@ -3,10 +3,10 @@
 #include <cstdint>
 
 #include "fuzz_support.h"
-#include "indrive/actor/eval_policy.h"
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/agent/policy.h"
-#include "indrive/common/nn/serialize.h"
+#include "indrive/actor/snapshot_file.h"
+#include "indrive/agent/agent.h"
+#include "indrive/agent/policy.h"
+#include "indrive/nn/serialize.h"
 
 namespace {
 

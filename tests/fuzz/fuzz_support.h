@@ -30,9 +30,9 @@
 #include <string_view>
 #include <vector>
 
-#include "indrive/common/agent/config.h"
-#include "indrive/common/checksum.h"
-#include "indrive/common/log.h"
+#include "indrive/agent/agent_config.h"
+#include "indrive/basics/checksum.h"
+#include "indrive/basics/log.h"
 
 namespace indrive::fuzz {
 

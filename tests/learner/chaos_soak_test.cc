@@ -31,7 +31,7 @@
 #include <thread>
 
 #include "indrive/actor/chunk_builder.h"
-#include "indrive/common/agent/config.h"
+#include "indrive/agent/agent_config.h"
 #include "process_harness.h"
 #include "testing.h"
 

@@ -20,8 +20,8 @@
 #include <functional>
 #include <random>
 
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/agent/agent.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/learner/learner.h"
 #include "process_harness.h"
 #include "testing.h"
@@ -205,7 +205,7 @@ TEST(CheckpointDisk, ALearnerWhoseDiskIsFullKeepsRunningAndFailsOnlyItsFinalChec
       "indrive-learner", config_file, run_dir, indrive::testing::unique_domain_id(),
       indrive::testing::source_path("deploy/dds/single_host.xml"),
       {"learner.checkpoint_minutes=0.01"});
-  const auto service = actor::ServiceConfig::resolve(
+  const auto service = service::ServiceConfig::resolve(
       {.config_file = config_file, .run_dir = run_dir, .domain_id = 0});
   const auto seed = pack_checkpoint({.env_steps = 300, .updates = 30, .policy_version = 3},
                                     agent::Agent(service.agent()).checkpoint_bytes());

@@ -13,8 +13,8 @@
 #include <regex>
 #include <thread>
 
-#include "indrive/common/agent/replay.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/agent/replay.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/learner/learner.h"
 #include "process_harness.h"
 #include "testing.h"

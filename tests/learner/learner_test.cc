@@ -8,7 +8,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 
-#include "indrive/common/checksum.h"
+#include "indrive/basics/checksum.h"
 
 namespace indrive::learner {
 namespace {

@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "child_process.h"
-#include "indrive/common/dds.h"
+#include "indrive/dds/participant.h"
 
 namespace indrive::testing {
 

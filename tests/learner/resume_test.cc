@@ -10,9 +10,9 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/log.h"
-#include "indrive/common/run_dir.h"
+#include "indrive/agent/agent.h"
+#include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
 #include "indrive/learner/learner.h"
 #include "testing.h"
 
@@ -26,7 +26,7 @@ class LearnerResumeTest : public ::testing::Test {
   void SetUp() override {
     const fs::path config_file = dir_.path() / "resume.yaml";
     std::ofstream(config_file) << "preset: tiny\nlearner:\n  checkpoint_keep: 5\n";
-    service_.emplace(actor::ServiceConfig::resolve(
+    service_.emplace(service::ServiceConfig::resolve(
         {.config_file = config_file,
          .run_dir = dir_.path() / "runs" / "rtest",
          .domain_id = indrive::testing::unique_domain_id(),
@@ -114,7 +114,7 @@ class LearnerResumeTest : public ::testing::Test {
   }
 
   indrive::testing::TempDir dir_{"indrive-resume"};
-  std::optional<actor::ServiceConfig> service_;
+  std::optional<service::ServiceConfig> service_;
   std::vector<std::uint8_t> agent_bytes_;
   std::mutex log_mutex_;
   std::string log_;

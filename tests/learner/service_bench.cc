@@ -42,8 +42,8 @@
 #include <thread>
 
 #include "child_process.h"
-#include "indrive/common/agent/config.h"
-#include "indrive/common/dds.h"
+#include "indrive/agent/agent_config.h"
+#include "indrive/dds/participant.h"
 #include "indrive/msg/policyPubSubTypes.h"
 #include "testing.h"
 

@@ -15,7 +15,7 @@
 
 #include "child_process.h"
 #include "indrive/actor/chunk_builder.h"
-#include "indrive/common/dds.h"
+#include "indrive/dds/participant.h"
 #include "testing.h"
 
 namespace indrive {

@@ -15,7 +15,7 @@
 #include <regex>
 #include <thread>
 
-#include "indrive/common/dds.h"
+#include "indrive/dds/participant.h"
 #include "netns.h"
 #include "process_harness.h"
 #include "testing.h"
@@ -165,7 +165,7 @@ class TwoHosts : public ::testing::Test {
     const double after_s = testing::seconds_since(joined);
     EXPECT_GE(evaluated("evaluator-on-b").first, newest_at_join) << logs();
     // Fast DDS's warning for fragments that reach a reader they are not meant for is harmless
-    // and hidden (common/src/dds/dds.cc, SinkConsumer); it once flooded every log.
+    // and hidden (common/dds/src/participant.cc, SinkConsumer); it once flooded every log.
     EXPECT_EQ(count_lines(kUnknownWriterFragments), 0) << logs();
     std::printf(
         "[figures] %s: evaluator on host %s had snapshot v%llu (newest at its start v%llu) "

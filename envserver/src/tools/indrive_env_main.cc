@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 #include "indrive/envserver/bev.h"
 #include "indrive/envserver/camera.h"
 #include "indrive/envserver/env.h"

@@ -21,8 +21,8 @@
 #include <tuple>
 #include <vector>
 
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/nn/kernels.h"
+#include "indrive/agent/agent.h"
+#include "indrive/nn/kernels.h"
 
 namespace {
 

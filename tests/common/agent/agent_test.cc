@@ -1,4 +1,4 @@
-#include "indrive/common/agent/agent.h"
+#include "indrive/agent/agent.h"
 
 #include <gtest/gtest.h>
 
@@ -8,8 +8,8 @@
 #include <iterator>
 
 #include "dot_env.h"
-#include "indrive/common/agent/policy.h"
-#include "indrive/common/checksum.h"
+#include "indrive/agent/policy.h"
+#include "indrive/basics/checksum.h"
 #include "testing.h"
 
 namespace indrive::agent {

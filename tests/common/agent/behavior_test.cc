@@ -1,4 +1,4 @@
-#include "indrive/common/agent/behavior.h"
+#include "indrive/agent/behavior.h"
 
 #include <gtest/gtest.h>
 

@@ -8,7 +8,7 @@
 #include <random>
 #include <vector>
 
-#include "indrive/common/agent/replay.h"
+#include "indrive/agent/replay.h"
 
 namespace indrive::agent::synthetic {
 

@@ -6,8 +6,8 @@
 #include <vector>
 
 #include "dot_env.h"
-#include "indrive/common/agent/behavior.h"
-#include "indrive/common/agent/world_model.h"
+#include "indrive/agent/behavior.h"
+#include "indrive/agent/world_model.h"
 
 namespace indrive::agent::dot_learning {
 

@@ -1,4 +1,4 @@
-#include "indrive/common/agent/intrinsic.h"
+#include "indrive/agent/intrinsic.h"
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,10 @@
 #include <numeric>
 
 #include "dot_env.h"
-#include "indrive/common/agent/world_model.h"
+#include "indrive/agent/disagreement.h"
+#include "indrive/agent/icm.h"
+#include "indrive/agent/rnd.h"
+#include "indrive/agent/world_model.h"
 
 namespace indrive::agent {
 namespace {

@@ -1,4 +1,4 @@
-#include "indrive/common/agent/local_trainer.h"
+#include "indrive/agent/local_trainer.h"
 
 #include <gtest/gtest.h>
 

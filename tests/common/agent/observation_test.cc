@@ -1,20 +1,11 @@
-#include "indrive/common/agent/observation.h"
+#include "indrive/agent/observation.h"
 
 #include <gtest/gtest.h>
 
 #include <vector>
 
-#include "indrive/envserver/scene.h"
-
 namespace indrive::agent {
 namespace {
-
-TEST(Observation, PaletteEqualsTheCameras) {
-  ASSERT_EQ(kNumClasses, env::kNumSemanticClasses);
-  for (int c = 0; c < kNumClasses; ++c) {
-    for (int k = 0; k < 3; ++k) EXPECT_EQ(kPaletteRgb[c][k], env::kPaletteRgb[c][k]) << c;
-  }
-}
 
 TEST(Observation, ClassIdsBecomeScaledRgb) {
   const std::vector<std::uint8_t> ids = {1, 0, 7};

@@ -6,8 +6,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "indrive/common/agent/agent.h"
-#include "indrive/common/nn/kernels.h"
+#include "indrive/agent/agent.h"
+#include "indrive/nn/kernels.h"
 
 namespace {
 const bool kCapped = (setenv("ONEDNN_MAX_CPU_ISA", "AVX512_CORE", 1), true);

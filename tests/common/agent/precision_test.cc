@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "dot_learning.h"
-#include "indrive/common/nn/kernels.h"
+#include "indrive/nn/kernels.h"
 
 namespace indrive::agent {
 namespace {

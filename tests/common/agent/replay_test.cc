@@ -1,4 +1,4 @@
-#include "indrive/common/agent/replay.h"
+#include "indrive/agent/replay.h"
 
 #include <gtest/gtest.h>
 
@@ -7,7 +7,7 @@
 #include <iterator>
 #include <set>
 
-#include "indrive/common/checksum.h"
+#include "indrive/basics/checksum.h"
 #include "testing.h"
 
 namespace indrive::agent {

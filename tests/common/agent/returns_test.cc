@@ -1,4 +1,4 @@
-#include "indrive/common/agent/returns.h"
+#include "indrive/agent/returns.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "indrive/common/agent/world_model.h"
+#include "indrive/agent/world_model.h"
 
 #include <gtest/gtest.h>
 

@@ -4,7 +4,7 @@
 #include <chrono>
 #include <cstdio>
 
-#include "indrive/common/dds_messages.h"
+#include "indrive/dds/messages.h"
 #include "synthetic_traffic.h"
 
 namespace {

@@ -30,8 +30,8 @@
 #include <string>
 #include <thread>
 
-#include "indrive/common/dds.h"
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
+#include "indrive/dds/participant.h"
 #include "synthetic_traffic.h"
 
 namespace {

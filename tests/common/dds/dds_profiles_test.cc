@@ -7,7 +7,7 @@
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <memory>
 
-#include "indrive/common/dds.h"
+#include "indrive/dds/participant.h"
 #include "testing.h"
 
 namespace indrive::dds {

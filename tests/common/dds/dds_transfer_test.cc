@@ -19,7 +19,7 @@
 #include <thread>
 #include <vector>
 
-#include "indrive/common/log.h"
+#include "indrive/basics/log.h"
 #include "testing.h"
 
 extern char** environ;

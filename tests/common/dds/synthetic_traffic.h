@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/common/dds_messages.h"
+#include "indrive/dds/messages.h"
 
 namespace indrive::testing {
 

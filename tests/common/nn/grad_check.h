@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::nn::testing {
 

@@ -1,7 +1,7 @@
 // The kernel layer: oneDNN products against Eigen's in fp32, bf16 products within the rounding
 // of their operands, the kept bf16 copies following every change of their source, products
 // inside a parallel region, the FLOP count and the precision setting's errors.
-#include "indrive/common/nn/kernels.h"
+#include "indrive/nn/kernels.h"
 
 #include <gtest/gtest.h>
 #include <omp.h>
@@ -10,7 +10,7 @@
 #include <span>
 #include <vector>
 
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::nn {
 namespace {

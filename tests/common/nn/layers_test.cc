@@ -1,7 +1,7 @@
 // Layers: initialisation, gradient checks of every layer and of composites (GRU unroll with
 // straight-through sampling, conv encoder + decoder, two-hot head), learning tests, and
 // bitwise reproducibility.
-#include "indrive/common/nn/layers.h"
+#include "indrive/nn/layers.h"
 
 #include <gtest/gtest.h>
 
@@ -11,7 +11,7 @@
 #include <iostream>
 
 #include "grad_check.h"
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::nn {
 namespace {

@@ -22,7 +22,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace {
 

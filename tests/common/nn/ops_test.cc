@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "grad_check.h"
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::nn {
 namespace {

@@ -1,12 +1,12 @@
 // Adam against a hand-written reference, clipping, warm-up, skipped steps, state round-trip,
 // and EMA.
-#include "indrive/common/nn/optim.h"
+#include "indrive/nn/optim.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::nn {
 namespace {

@@ -1,9 +1,9 @@
 // Parameter blobs: round trip, and clear errors for wrong shapes, names, groups and corruption.
-#include "indrive/common/nn/serialize.h"
+#include "indrive/nn/serialize.h"
 
 #include <gtest/gtest.h>
 
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::nn {
 namespace {
@@ -81,6 +81,34 @@ TEST(SerializeTest, WrongNamesAndGroupsAreReported) {
   GruCell gru(renamed, "gru", 4, 6, rng);
   const std::string msg = load_error(save_params(a), renamed);
   EXPECT_NE(msg.find("'mlp.h0.w' where the model has 'policy.h0.w'"), std::string::npos) << msg;
+}
+
+TEST(SerializeTest, ContentsNameGroupsParametersAndShapesWithoutLoading) {
+  ParamGroup a("world_model"), c("actor");
+  build(a, 8, 1);
+  build(c, 4, 3);
+  const ParamGroup* out[] = {&a, &c};
+  const auto blob = save_params(out);
+  EXPECT_TRUE(starts_like_blob(blob));
+  const std::vector<BlobGroup> contents = blob_contents(blob);
+  ASSERT_EQ(contents.size(), 2u);
+  EXPECT_EQ(contents[0].name, "world_model");
+  EXPECT_EQ(contents[1].name, "actor");
+  ASSERT_EQ(contents[1].params.size(), c.params().size());
+  for (std::size_t i = 0; i < c.params().size(); ++i) {
+    EXPECT_EQ(contents[1].params[i].name, c.params()[i]->name());
+    EXPECT_EQ(contents[1].params[i].shape, c.params()[i]->shape());
+  }
+
+  // A flipped byte fails the checksum; a cut blob and foreign bytes are refused by name.
+  auto corrupt = blob;
+  corrupt[corrupt.size() / 2] ^= 0x10;
+  EXPECT_THROW(blob_contents(corrupt), SerializationError);
+  const std::vector<std::uint8_t> cut(blob.begin(), blob.begin() + 10);
+  EXPECT_THROW(blob_contents(cut), SerializationError);
+  const std::vector<std::uint8_t> text = {'h', 'e', 'l', 'l', 'o'};
+  EXPECT_FALSE(starts_like_blob(text));
+  EXPECT_FALSE(starts_like_blob(std::span<const std::uint8_t>()));
 }
 
 }  // namespace

@@ -1,5 +1,5 @@
 // Shapes, the graph's arena and backward pass, no-grad mode, parameters and the RNG.
-#include "indrive/common/nn/tensor.h"
+#include "indrive/nn/tensor.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 #include <cstring>
 #include <vector>
 
-#include "indrive/common/nn/nn.h"
+#include "indrive/nn/nn.h"
 
 namespace indrive::nn {
 namespace {

@@ -4,7 +4,7 @@
 // random spawns, a density redrawn every density period, fresh traffic and spawn seeds per
 // episode, all from one seed).
 //
-//   env::Env env(service.env());
+//   env::Env env(env_config(service));
 //   EnvAdapter adapter(env, EnvAdapter::options_from(service));
 //   adapter.on_result([&](const env::StepResult& r) { coverage.observe(r.ego.pose); });
 //   LocalTrainer trainer(service.agent(), adapter);
@@ -16,11 +16,17 @@
 #include <string>
 #include <vector>
 
-#include "indrive/actor/service_config.h"
-#include "indrive/common/agent/local_trainer.h"
+#include "indrive/agent/local_trainer.h"
 #include "indrive/envserver/env.h"
+#include "indrive/service/run_config.h"
 
 namespace indrive::actor {
+
+// The environment of a training actor from a run's env.* keys: the town, the image size of the
+// agent's preset, the task in task phases.
+env::EnvConfig env_config(const service::ServiceConfig& service);
+// The same for another agent configuration (an evaluator's, sized by its snapshot file).
+env::EnvConfig env_config(const service::ServiceConfig& service, const agent::AgentConfig& agent);
 
 // The routes named by `env.route`: none (empty text: random spawns, pretraining), one name, or
 // a comma-separated list (task phases on several fixed routes, as the paper fine-tunes on the
@@ -47,7 +53,7 @@ class EnvAdapter : public agent::Environment {
   EnvAdapter(env::Env& env, EnvAdapterOptions options);
   // The options a training actor of this run uses (env.route, env.densities,
   // env.density_period_steps, run.seed).
-  static EnvAdapterOptions options_from(const ServiceConfig& config);
+  static EnvAdapterOptions options_from(const service::ServiceConfig& config);
 
   // Starts an episode with the next density and fresh seeds; returns its first frame.
   agent::EnvStep reset() override;

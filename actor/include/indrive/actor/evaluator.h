@@ -1,5 +1,6 @@
 // The evaluator: an actor in evaluation mode. It runs its share of the protocol grid
-// (protocol.h) with one policy source (eval_policy.h) and writes one CSV row (and, when it
+// (protocol.h), one protocol episode at a time (protocol_episode.h), with one policy source
+// (policies.h) and writes one CSV row (and, when it
 // evaluates a learner's snapshot, one EpisodeResult on DDS) per episode.
 //
 // Policy sources (eval.policy, or indrive-actor --policy):
@@ -30,7 +31,7 @@
 #include <string>
 
 #include "indrive/actor/protocol.h"
-#include "indrive/actor/service_config.h"
+#include "indrive/service/run_config.h"
 
 namespace indrive::actor {
 
@@ -46,7 +47,7 @@ class Evaluator {
   // Checks the inputs (grid names, policy source, head, snapshot file) and sets up the
   // environment, and DDS only when a learner's snapshot is evaluated. Throws EvalError,
   // dds::DdsError or the envserver's errors with what is wrong.
-  Evaluator(const ServiceConfig& config, int index, int count);
+  Evaluator(const service::ServiceConfig& config, int index, int count);
   ~Evaluator();
   Evaluator(const Evaluator&) = delete;
   Evaluator& operator=(const Evaluator&) = delete;

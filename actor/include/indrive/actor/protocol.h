@@ -15,10 +15,18 @@
 
 #include <array>
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 namespace indrive::actor {
+
+// A bad evaluator input (unknown town, route, policy or head; unreadable snapshot file; a
+// snapshot without the head asked for). The message names the value and what is allowed.
+class EvalError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
 
 // The fixed seed sets of the protocol (any fixed values serve; these are ours).
 inline constexpr std::array<int, 3> kTrafficSeeds = {101, 202, 303};

@@ -6,7 +6,7 @@
 // Announces of a version newer than any received make the actor re-request it (late joiners
 // can miss transient-local data in Fast DDS 2.9).
 //
-//   SnapshotInbox inbox(run_id, architecture_descriptor(agent_config), 2.0);
+//   SnapshotInbox inbox(run_id, service::architecture_descriptor(agent_config), 2.0);
 //   reader = participant.make_reader<msg::PolicySnapshot>([&](auto& s) { inbox.offer(s); });
 //   if (auto snapshot = inbox.take_newer_than(held_version)) policy.load_snapshot(...);
 #pragma once
@@ -18,7 +18,7 @@
 #include <optional>
 #include <string>
 
-#include "indrive/common/dds_messages.h"
+#include "indrive/dds/messages.h"
 
 namespace indrive::actor {
 

@@ -2,7 +2,7 @@
 // until the first arrives), a TrajectoryChunk every L steps and at episode end, an
 // EpisodeResult per episode and a Heartbeat, paced by the learner's StepAllowance.
 //
-//   ServiceConfig config = ServiceConfig::resolve(options);
+//   service::ServiceConfig config = service::ServiceConfig::resolve(options);
 //   TrainingActor actor(config, /*id=*/0);
 //   actor.run(stop_flag);          // returns when stop_flag is set
 #pragma once
@@ -11,7 +11,7 @@
 #include <cstdint>
 #include <memory>
 
-#include "indrive/actor/service_config.h"
+#include "indrive/service/run_config.h"
 
 namespace indrive::actor {
 
@@ -33,7 +33,7 @@ struct ActorStats {
 class TrainingActor {
  public:
   // Sets up DDS (throws dds::DdsError) and the environment (throws the envserver's errors).
-  TrainingActor(const ServiceConfig& config, std::uint32_t id);
+  TrainingActor(const service::ServiceConfig& config, std::uint32_t id);
   ~TrainingActor();
   TrainingActor(const TrainingActor&) = delete;
   TrainingActor& operator=(const TrainingActor&) = delete;

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/common/episode_csv.h"
+#include "indrive/basics/episode_csv.h"
 
 namespace indrive::deploy {
 

@@ -28,7 +28,7 @@ namespace indrive::env {
 // Where town sources and converted networks live.
 struct TownOptions {
   // Folder with towns/ and routes/; empty: $INDRIVE_ENV_DATA_DIR, else envserver/data under
-  // the data roots of indrive/common/data_path.h ($INDRIVE_DATA_DIR, installed, source tree).
+  // the data roots of indrive/basics/data_path.h ($INDRIVE_DATA_DIR, installed, source tree).
   std::filesystem::path data_dir;
   // Folder for converted networks; empty: $INDRIVE_CACHE_DIR, else $XDG_CACHE_HOME/indrive,
   // else ~/.cache/indrive, else the system temp folder.

@@ -21,7 +21,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "indrive/common/dds_messages.h"
+#include "indrive/dds/messages.h"
 
 namespace indrive::learner {
 

@@ -1,7 +1,7 @@
 // Turning received TrajectoryChunks into replay steps, or into a counted drop.
 //
 // Nothing foreign or corrupt may enter replay: a chunk is decoded only after the wire checks
-// (schema, run id, shape, checksum; dds_messages.h) and the learner's own: frame size of this
+// (schema, run id, shape, checksum; dds/messages.h) and the learner's own: frame size of this
 // model, phase, rewards present exactly in task phases, action and class ids in range.
 //
 //   DecodedChunk decoded;
@@ -18,8 +18,8 @@
 #include <tuple>
 #include <vector>
 
-#include "indrive/common/agent/replay.h"
-#include "indrive/common/dds_messages.h"
+#include "indrive/agent/replay.h"
+#include "indrive/dds/messages.h"
 
 namespace indrive::learner {
 

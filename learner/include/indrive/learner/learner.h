@@ -17,41 +17,10 @@
 #include <string>
 #include <vector>
 
-#include "indrive/actor/service_config.h"
+#include "indrive/learner/checkpoint.h"
+#include "indrive/service/run_config.h"
 
 namespace indrive::learner {
-
-// A checkpoint of the learner could not be read (the message names the file and the fault).
-class CheckpointError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
-// Counters a checkpoint carries besides the agent, so that a restart continues them.
-struct LearnerCounters {
-  std::int64_t env_steps = 0;  // steps received and stored
-  std::int64_t updates = 0;    // training steps done
-  std::uint64_t policy_version = 0;
-  std::uint64_t learner_epoch = 0;  // starts of the learner in this run
-};
-
-// A learner checkpoint (format version 3): a header line, the counters and section sizes as
-// one JSON line, the agent's own checkpoint bytes, then the replay buffer's file
-// (ReplayBuffer::save) compressed with zstd, so that a resumed learner trains on the data it had
-// instead of refilling, and a fixed-size trailer "CRC32 <8 hex digits>\n" with the CRC-32 of
-// every byte before it. `replay_bytes` may be empty (no replay section).
-std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
-                                          std::span<const std::uint8_t> agent_bytes,
-                                          std::span<const std::uint8_t> replay_bytes = {});
-// Splits a packed checkpoint into counters, agent bytes and (when `replay_bytes` is given) the
-// decompressed replay file, empty when the checkpoint has none. Reads versions 1 (no replay
-// section) and 2 (no trailer) too. Throws CheckpointError when the bytes are not a learner
-// checkpoint or are truncated or damaged. Memory stays bounded by what the bytes hold: the
-// replay section is never given more room than its zstd frame produces, whatever the damaged
-// sizes of the counters line say.
-LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
-                                  std::vector<std::uint8_t>& agent_bytes,
-                                  std::vector<std::uint8_t>* replay_bytes = nullptr);
 
 // What the learner has done, readable after run().
 struct LearnerStats {
@@ -80,7 +49,7 @@ class Learner {
   // renamed to <name>.damaged), and sets up DDS. Throws CheckpointError listing each file and
   // its fault when there are checkpoints but none restores, and agent::AgentError,
   // dds::DdsError or IoError with what is wrong.
-  explicit Learner(const actor::ServiceConfig& config);
+  explicit Learner(const service::ServiceConfig& config);
   ~Learner();
   Learner(const Learner&) = delete;
   Learner& operator=(const Learner&) = delete;

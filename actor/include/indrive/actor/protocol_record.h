@@ -1,0 +1,40 @@
+// The protocol's rules for one episode, the same wherever an episode is evaluated (the
+// evaluator, the local trainer's evaluation): which towns and routes a grid may name, the step
+// budget of a route, route completion, the environment of protocol episodes and the verdict
+// written as a CSV row.
+#pragma once
+
+#include <cstdint>
+
+#include "indrive/actor/protocol.h"
+#include "indrive/basics/episode_csv.h"
+#include "indrive/envserver/env.h"
+
+namespace indrive::actor {
+
+// Throws EvalError unless every town is a built-in name, an existing map file or grid:<seed>,
+// and every route is one of the four route names; the message lists the allowed values.
+void check_grid_names(const ProtocolGrid& grid);
+
+// Step budget of a route: ceil(slack * length_m / (speed_mps * dt_s)). With the defaults
+// (3 m/s, the slower task speed, and 1.5x slack at 10 Hz) that is 5 steps per metre: 3,245 steps
+// for town01's longest loop (649 m), where a fixed 1,000 steps (100 s) covers 300-600 m at
+// 3-6 m/s, less than one lap.
+int route_step_budget(double length_m, double speed_mps = 3.0, double slack = 1.5,
+                      double dt_s = 0.1);
+// The fraction of the route an episode drove, in [0, 1]: progress_m / length_m (the route's
+// length, set back from its last junction on a point-to-point route), and 1 when the
+// destination event fired (within kDestinationRadiusM of the terminal waypoint, or a lap).
+double route_completion(double progress_m, double length_m, std::uint32_t events);
+// The env config for protocol episodes: the route's step budget ends them, so the training
+// time limit (env.time_limit_steps) is lifted out of its way.
+env::EnvConfig protocol_env_config(env::EnvConfig config);
+
+// The protocol's verdict on one episode of `spec`, as a CSV row without the run-level fields
+// (run id, method, eval kind, task, seeds of training, policy version): success means the
+// destination event with no failure event; otherwise the failure events name the reason.
+// `events`: EventBit bits of the last step (kTimeLimit included when the budget ran out).
+EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int steps,
+                              double route_completion, double episode_return);
+
+}  // namespace indrive::actor

@@ -1,0 +1,60 @@
+#include "indrive/actor/protocol_episode.h"
+
+#include <optional>
+
+#include "indrive/actor/episode_video.h"
+#include "indrive/actor/protocol_record.h"
+#include "indrive/basics/check.h"
+#include "indrive/envserver/events.h"
+
+namespace indrive::actor {
+
+ProtocolEpisodeOptions protocol_episode_options(const config::Config& config,
+                                                const std::filesystem::path& video_dir) {
+  return {.budget_speed_mps = config.get<double>("eval.budget_speed_mps"),
+          .budget_slack = config.get<double>("eval.budget_slack"),
+          .video_episodes = config.get<int>("eval.video_episodes"),
+          .video_dir = video_dir};
+}
+
+EpisodeOutcome run_protocol_episode(env::Env& env, EpisodePolicy& policy, const EpisodeSpec& spec,
+                                    const ProtocolEpisodeOptions& options,
+                                    const std::atomic<bool>& stop) {
+  env::StepResult step = env.reset({.town = spec.town,
+                                    .route = spec.route,
+                                    .density = spec.density,
+                                    .traffic_seed = static_cast<std::uint64_t>(spec.traffic_seed),
+                                    .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
+  const env::Route* route = env.route();
+  INDRIVE_CHECK(route != nullptr) << "an evaluation reset must place the ego on its route";
+  const int budget =
+      route_step_budget(route->length_m(), options.budget_speed_mps, options.budget_slack);
+  policy.begin(env, spec);
+  std::optional<EpisodeVideo> video;
+  if (spec.episode < options.video_episodes) {
+    video.emplace(episode_video_path(options.video_dir, spec), env, spec, budget);
+    video->add(env, step);
+  }
+  EpisodeOutcome outcome;
+  while (!step.is_last && step.step < budget && !stop.load()) {
+    step = env.step(policy.act(env, step));
+    outcome.episode_return += step.reward.value_or(0.0);
+    if (video) video->add(env, step);
+  }
+  outcome.stopped = !step.is_last && step.step < budget;
+  outcome.events = step.events;
+  const bool budget_ran_out = !step.is_last && !outcome.stopped;
+  if (budget_ran_out) outcome.events |= env::kTimeLimit;
+  outcome.steps = step.step;
+  outcome.route_completion =
+      route_completion(step.route_progress_m, route->length_m(), outcome.events);
+  if (video) video->finish(outcome.events, budget_ran_out);
+  return outcome;
+}
+
+EpisodeRecord protocol_record(const EpisodeSpec& spec, const EpisodeOutcome& outcome) {
+  return protocol_record(spec, outcome.events, outcome.steps, outcome.route_completion,
+                         outcome.episode_return);
+}
+
+}  // namespace indrive::actor

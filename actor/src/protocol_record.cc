@@ -1,0 +1,68 @@
+#include "indrive/actor/protocol_record.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "indrive/basics/check.h"
+#include "indrive/envserver/events.h"
+#include "indrive/envserver/town.h"
+#include "text.h"
+
+namespace indrive::actor {
+
+void check_grid_names(const ProtocolGrid& grid) {
+  const std::vector<std::string> builtin = env::builtin_towns();
+  for (const std::string& town : grid.towns) {
+    const bool known = std::find(builtin.begin(), builtin.end(), town) != builtin.end() ||
+                       town.starts_with("grid:") || std::filesystem::is_regular_file(town);
+    if (!known) {
+      throw EvalError("unknown evaluation town '" + town + "'; use a built-in town (" +
+                      join(builtin) + "), a path to a .net.xml or .xodr map, or grid:<seed>");
+    }
+  }
+  for (const std::string& route : grid.routes) {
+    if (std::find(env::kRouteNames.begin(), env::kRouteNames.end(), route) ==
+        env::kRouteNames.end()) {
+      std::vector<std::string> names(env::kRouteNames.begin(), env::kRouteNames.end());
+      throw EvalError("unknown evaluation route '" + route + "'; every town has " + join(names));
+    }
+  }
+}
+
+int route_step_budget(double length_m, double speed_mps, double slack, double dt_s) {
+  INDRIVE_CHECK(length_m >= 0.0 && speed_mps > 0.0 && slack > 0.0 && dt_s > 0.0)
+      << "route_step_budget(" << length_m << ", " << speed_mps << ", " << slack << ", " << dt_s
+      << ")";
+  return std::max(1, static_cast<int>(std::ceil(slack * length_m / (speed_mps * dt_s) - 1e-9)));
+}
+
+double route_completion(double progress_m, double length_m, std::uint32_t events) {
+  if ((events & env::kDestination) != 0) return 1.0;
+  if (length_m <= 0.0) return 0.0;
+  return std::clamp(progress_m / length_m, 0.0, 1.0);
+}
+
+env::EnvConfig protocol_env_config(env::EnvConfig config) {
+  config.events.time_limit_steps = std::numeric_limits<int>::max() / 2;
+  return config;
+}
+
+EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int steps,
+                              double route_completion, double episode_return) {
+  const std::uint32_t failures = events & env::kFailureEvents;
+  EpisodeRecord record;
+  record.town = spec.town;
+  record.route = spec.route;
+  record.density = spec.density;
+  record.traffic_seed = spec.traffic_seed;
+  record.spawn_seed = spec.spawn_seed;
+  record.episode = spec.episode;
+  record.success = (events & env::kDestination) != 0 && failures == 0;
+  record.failure_reason = record.success ? "" : env::event_names(failures);
+  record.steps = steps;
+  record.route_completion = route_completion;
+  record.episode_return = episode_return;
+  return record;
+}
+}  // namespace indrive::actor

@@ -1,0 +1,28 @@
+// Latent ensemble disagreement (LD), the intrinsic reward of InDRiVE: K predictors of the next
+// posterior's categorical probabilities from [u_t, onehot(a_t)]; the reward is disag_scale times
+// the mean over latent dimensions of the variance across members (or its square root with
+// intrinsic.disag_reward=std). See intrinsic.h for the interface the learner calls.
+#pragma once
+
+#include <vector>
+
+#include "indrive/agent/intrinsic.h"
+
+namespace indrive::agent {
+
+// Latent ensemble disagreement (InDRiVE).
+class LatentDisagreement : public IntrinsicModule {
+ public:
+  LatentDisagreement(const IntrinsicConfig& config, const WorldModelConfig& model, nn::Rng& rng);
+  nn::Tensor loss(const Transitions& batch) override;
+  std::vector<float> reward(nn::Tensor feat, nn::Tensor action, nn::Tensor next_feat) override;
+  // Predicted next-latent probabilities of member k: input (N, feat + 9), result (N, S).
+  nn::Tensor predict(int k, nn::Tensor input);
+  int members() const { return static_cast<int>(members_.size()); }
+
+ private:
+  int classes_;
+  std::vector<nn::Mlp> members_;
+};
+
+}  // namespace indrive::agent

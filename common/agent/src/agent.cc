@@ -1,0 +1,391 @@
+#include "indrive/agent/agent.h"
+
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <type_traits>
+
+#include "indrive/basics/check.h"
+#include "indrive/basics/checksum.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/nn/kernels.h"
+
+namespace indrive::agent {
+
+using nn::Shape;
+using nn::Tensor;
+
+namespace {
+
+constexpr char kMagic[4] = {'I', 'A', 'G', 'T'};
+constexpr std::uint32_t kVersion = 1;
+
+// Section writer/reader of the checkpoint: u64 length + bytes per section.
+void put_section(std::vector<std::uint8_t>& out, std::span<const std::uint8_t> bytes) {
+  const std::uint64_t size = bytes.size();
+  const auto* p = reinterpret_cast<const std::uint8_t*>(&size);
+  out.insert(out.end(), p, p + sizeof(size));
+  out.insert(out.end(), bytes.begin(), bytes.end());
+}
+
+template <typename T>
+std::vector<std::uint8_t> bytes_of(const std::vector<T>& v) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  const auto* p = reinterpret_cast<const std::uint8_t*>(v.data());
+  return {p, p + v.size() * sizeof(T)};
+}
+
+template <typename T>
+std::vector<T> values_of(std::span<const std::uint8_t> bytes) {
+  std::vector<T> v(bytes.size() / sizeof(T));
+  std::memcpy(v.data(), bytes.data(), v.size() * sizeof(T));
+  return v;
+}
+
+class SectionReader {
+ public:
+  SectionReader(std::span<const std::uint8_t> data, std::string file)
+      : data_(data), file_(std::move(file)) {}
+  std::span<const std::uint8_t> next() {
+    std::uint64_t size = 0;
+    if (pos_ + sizeof(size) > data_.size())
+      throw AgentError("checkpoint " + file_ + " is truncated");
+    std::memcpy(&size, data_.data() + pos_, sizeof(size));
+    pos_ += sizeof(size);
+    // Compared as a remainder: a damaged size near 2^64 would wrap pos_ + size.
+    if (size > data_.size() - pos_) throw AgentError("checkpoint " + file_ + " is truncated");
+    auto out = data_.subspan(pos_, size);
+    pos_ += size;
+    return out;
+  }
+
+ private:
+  std::span<const std::uint8_t> data_;
+  std::string file_;
+  std::size_t pos_ = 0;
+};
+
+// Architecture descriptor: the sizes that must match between checkpoint and agent.
+std::vector<std::int64_t> architecture(const AgentConfig& c) {
+  const WorldModelConfig& w = c.world_model;
+  return {w.image,
+          w.channels,
+          w.cnn_depth,
+          w.deter,
+          w.units,
+          w.stoch,
+          w.classes,
+          w.head_layers,
+          static_cast<std::int64_t>(c.intrinsic.method),
+          c.intrinsic.ensemble,
+          c.intrinsic.units,
+          c.intrinsic.layers,
+          c.intrinsic.rnd_embed,
+          c.behavior.units,
+          c.behavior.layers};
+}
+// Seconds since the last call (or construction), and the product FLOPs in that time
+// (nn::gemm_flops, into *flops): one stage of an update at a time.
+class StageClock {
+ public:
+  double lap(double* flops) {
+    const auto now = std::chrono::steady_clock::now();
+    const double s = std::chrono::duration<double>(now - last_).count();
+    const std::uint64_t f = nn::gemm_flops();
+    *flops = static_cast<double>(f - flops_);
+    last_ = now, flops_ = f;
+    return s;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+  std::uint64_t flops_ = nn::gemm_flops();
+};
+}  // namespace
+
+TrainMetrics StepTiming::as_metrics() const {
+  auto f = [](double s) { return static_cast<float>(s); };
+  return {{"time/world_model_s", f(world_model)}, {"time/intrinsic_s", f(intrinsic)},
+          {"time/imagine_s", f(imagine)},         {"time/reward_s", f(reward)},
+          {"time/behavior_s", f(behavior)},       {"time/backward_s", f(backward)},
+          {"time/optimizers_s", f(optimizers)},   {"time/update_s", f(total())}};
+}
+
+Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
+  validate(config_);
+  try {
+    nn::set_precision(nn::resolve_precision(config_.precision));
+  } catch (const nn::PrecisionError& e) {
+    throw AgentConfigError(std::string("agent.") + e.what());
+  }
+  wm_ = std::make_unique<WorldModel>(config_.world_model, rng_);
+  intrinsic_ = make_intrinsic(config_.intrinsic, config_.world_model, rng_);
+  expl_ =
+      std::make_unique<ActorCritic>("expl", config_.behavior, config_.world_model.feat_dim(), rng_);
+  task_ =
+      std::make_unique<ActorCritic>("task", config_.behavior, config_.world_model.feat_dim(), rng_);
+  const WorldModelConfig& w = config_.world_model;
+  wm_opt_ = std::make_unique<nn::Adam>(wm_->params(),
+                                       nn::AdamConfig{.lr = w.lr, .eps = w.eps, .clip = w.clip});
+  reward_opt_ = std::make_unique<nn::Adam>(
+      wm_->reward_params(), nn::AdamConfig{.lr = w.lr, .eps = w.eps, .clip = w.clip});
+  if (config_.phase == Phase::kFinetune) set_phase(Phase::kFinetune);
+}
+
+void Agent::set_phase(Phase phase) {
+  config_.phase = phase;
+  // The task actor starts from the exploration actor once; its critic stays fresh.
+  if (phase == Phase::kFinetune && !task_actor_initialised_) {
+    task_->copy_actor_from(*expl_);
+    task_actor_initialised_ = true;
+  }
+}
+
+std::string Agent::acting_actor_group() const {
+  return config_.phase == Phase::kPretrain ? expl_->actor_params().name()
+                                           : task_->actor_params().name();
+}
+
+TrainMetrics Agent::train_step(const SequenceBatch& batch) {
+  const Phase phase = config_.phase;
+  const bool task_phase = phase != Phase::kPretrain;
+  if (!task_phase && !batch.rewards.empty()) {
+    throw AgentError(
+        "a pretraining batch carries rewards; pretraining must be reward-free "
+        "(make the replay buffer with has_rewards = false)");
+  }
+  if (task_phase && batch.rewards.empty()) {
+    throw AgentError(std::string("a ") + std::string(to_string(phase)) +
+                     " batch has no rewards; task phases need a replay buffer with rewards");
+  }
+  StageClock clock;
+  timing_ = {};
+  flops_ = {};
+  nn::Graph& graph = nn::current_graph();
+  graph.reset();
+  TrainMetrics metrics;
+  const int b = batch.batch, t = batch.length;
+
+  // World model: trained in pretrain and dreamer, a frozen feature extractor in finetune.
+  WorldModelOutput out;
+  Tensor total;
+  if (phase == Phase::kFinetune) {
+    {
+      nn::NoGradGuard frozen;
+      out = wm_->observe(batch, false, rng_);
+    }
+    Tensor target = WorldModel::time_major_column(batch.rewards, b, t);
+    total = nn::mean(
+        nn::twohot_cross_entropy(wm_->reward_logits(nn::stop_gradient(out.features)), target));
+    out.reward = total.item();
+  } else {
+    out = wm_->observe(batch, phase == Phase::kDreamer, rng_);
+    total = out.loss;
+  }
+  metrics.insert(metrics.end(), {{"wm/recon", out.recon},
+                                 {"wm/kl", out.kl},
+                                 {"wm/dyn", out.dyn},
+                                 {"wm/rep", out.rep},
+                                 {"wm/cont", out.cont}});
+  if (task_phase) metrics.emplace_back("wm/reward", out.reward);
+  timing_.world_model = clock.lap(&flops_.world_model);
+
+  // Intrinsic module: trained on replay transitions in pretraining only.
+  if (phase == Phase::kPretrain) {
+    Transitions tr = make_transitions(out.features, out.post_probs,
+                                      WorldModel::action_one_hot(batch.actions, b, t),
+                                      WorldModel::time_major_column(batch.is_first, b, t), b);
+    Tensor intrinsic_loss = intrinsic_->loss(tr);
+    total = nn::add(total, intrinsic_loss);
+    metrics.emplace_back("intrinsic/loss", intrinsic_->last_loss());
+    timing_.intrinsic = clock.lap(&flops_.intrinsic);
+  }
+
+  // Behaviour in imagination from every posterior state.
+  ActorCritic& behavior = task_phase ? *task_ : *expl_;
+  const RssmState start{nn::stop_gradient(out.deter), nn::stop_gradient(out.stoch)};
+  std::vector<float> start_cont;
+  {
+    // Time-major like the posterior states: row t * B + i is step t of sequence i.
+    Tensor terminal = WorldModel::time_major_column(batch.is_terminal, b, t);
+    start_cont.reserve(terminal.numel());
+    for (float x : terminal.values()) start_cont.push_back(1.0f - x);
+  }
+  ImaginedTrajectory traj = behavior.imagine(*wm_, start, rng_, std::move(start_cont));
+  timing_.imagine = clock.lap(&flops_.imagine);
+  std::vector<float> rewards;
+  {
+    nn::NoGradGuard no_grad;
+    if (task_phase) {
+      Tensor r = nn::twohot_mean(wm_->reward_logits(traj.next_features()));
+      rewards.assign(r.values().begin(), r.values().end());
+    } else {
+      rewards = intrinsic_->reward(traj.state_features(), traj.actions, traj.next_features());
+      metrics.emplace_back("intrinsic/raw_reward", intrinsic_->last_raw_reward());
+      metrics.emplace_back("intrinsic/raw_std", intrinsic_->last_raw_std());
+    }
+  }
+  timing_.reward = clock.lap(&flops_.reward);
+  BehaviorMetrics bm;
+  total = nn::add(total, behavior.loss(traj, rewards, &bm));
+  const std::string prefix = task_phase ? "task/" : "expl/";
+  metrics.insert(metrics.end(), {{prefix + "reward", bm.reward_mean},
+                                 {prefix + "return", bm.return_mean},
+                                 {prefix + "return_scale", bm.return_scale},
+                                 {prefix + "value", bm.value_mean},
+                                 {prefix + "actor_loss", bm.actor_loss},
+                                 {prefix + "critic_loss", bm.critic_loss},
+                                 {prefix + "entropy", bm.entropy}});
+  timing_.behavior = clock.lap(&flops_.behavior);
+
+  // One backward for all losses; stop-gradients keep each loss inside its own part, and only
+  // the optimisers of the parts that train in this phase are stepped.
+  graph.backward(total);
+  timing_.backward = clock.lap(&flops_.backward);
+  if (phase != Phase::kFinetune) {
+    const nn::StepStats s = wm_opt_->step();
+    metrics.emplace_back("wm/grad_norm", s.grad_norm);
+  }
+  if (phase == Phase::kPretrain) {
+    intrinsic_->step();
+  } else {
+    reward_opt_->step();
+  }
+  behavior.step();
+  // Gradients that reached frozen parts (none should) are dropped, never applied later.
+  wm_->params().zero_grad();
+  intrinsic_->params().zero_grad();
+  timing_.optimizers = clock.lap(&flops_.optimizers);
+  ++train_steps_;
+  return metrics;
+}
+
+std::vector<std::uint8_t> Agent::snapshot() const {
+  const nn::ParamGroup* actor =
+      config_.phase == Phase::kPretrain ? &expl_->actor_params() : &task_->actor_params();
+  const nn::ParamGroup* parts[2] = {&wm_->params(), actor};
+  return nn::save_params(std::span<const nn::ParamGroup* const>(parts, 2));
+}
+
+std::vector<nn::ParamGroup*> Agent::groups() {
+  std::vector<nn::ParamGroup*> out = {&wm_->params(), &wm_->reward_params()};
+  for (nn::ParamGroup* g : intrinsic_->groups()) out.push_back(g);
+  for (ActorCritic* ac : {expl_.get(), task_.get()}) {
+    out.push_back(&ac->actor_params());
+    out.push_back(&ac->critic_params());
+    out.push_back(&ac->slow_critic_params());
+  }
+  return out;
+}
+
+std::vector<const nn::ParamGroup*> Agent::groups() const {
+  std::vector<nn::ParamGroup*> g = const_cast<Agent*>(this)->groups();
+  return {g.begin(), g.end()};
+}
+
+std::vector<nn::Adam*> Agent::optimizers() const {
+  return {wm_opt_.get(),
+          reward_opt_.get(),
+          &intrinsic_->optimizer(),
+          &expl_->actor_optimizer(),
+          &expl_->critic_optimizer(),
+          &task_->actor_optimizer(),
+          &task_->critic_optimizer()};
+}
+
+std::vector<std::uint8_t> Agent::checkpoint_bytes() const {
+  std::vector<std::uint8_t> out(kMagic, kMagic + 4);
+  out.resize(8);
+  std::memcpy(out.data() + 4, &kVersion, 4);
+  put_section(out, bytes_of(architecture(config_)));
+  const std::vector<const nn::ParamGroup*> g = groups();
+  put_section(out, nn::save_params(std::span<const nn::ParamGroup* const>(g)));
+  for (const nn::Adam* opt : optimizers()) put_section(out, opt->save_state());
+  std::vector<float> norms = intrinsic_->normalizer_state();
+  norms.push_back(static_cast<float>(norms.size()));
+  for (ActorCritic* ac : {expl_.get(), task_.get()}) {
+    for (float x : ac->return_normalizer().state()) norms.push_back(x);
+  }
+  put_section(out, bytes_of(norms));
+  // Counters and the RNG: the generator is a plain state of four words.
+  static_assert(std::is_trivially_copyable_v<nn::Rng>);
+  std::vector<std::uint8_t> rng_bytes(sizeof(nn::Rng));
+  std::memcpy(rng_bytes.data(), &rng_, sizeof(nn::Rng));
+  put_section(out, rng_bytes);
+  put_section(out,
+              bytes_of(std::vector<std::int64_t>{train_steps_, task_actor_initialised_ ? 1 : 0}));
+  const std::uint32_t crc = indrive::crc32(out.data(), out.size());
+  const auto* c = reinterpret_cast<const std::uint8_t*>(&crc);
+  out.insert(out.end(), c, c + 4);
+  return out;
+}
+
+void Agent::save_checkpoint(const std::filesystem::path& path) const {
+  try {
+    atomic_write(path, checkpoint_bytes());
+  } catch (const IoError& error) {
+    throw AgentError(std::string("cannot write checkpoint: ") + error.what());
+  }
+}
+
+void Agent::load_checkpoint(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  std::ifstream file(path, std::ios::binary);
+  if (!file) throw AgentError("cannot open checkpoint " + name + ": check the path");
+  const std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(file)),
+                                       std::istreambuf_iterator<char>());
+  load_checkpoint(data, name);
+}
+
+void Agent::load_checkpoint(std::span<const std::uint8_t> data, const std::string& name) {
+  if (data.size() < 12 || std::memcmp(data.data(), kMagic, 4) != 0) {
+    throw AgentError("file " + name + " is not an agent checkpoint");
+  }
+  std::uint32_t crc;
+  std::memcpy(&crc, data.data() + data.size() - 4, 4);
+  if (indrive::crc32(data.data(), data.size() - 4) != crc) {
+    throw AgentError("checkpoint " + name + " is corrupt (checksum mismatch)");
+  }
+  std::uint32_t version;
+  std::memcpy(&version, data.data() + 4, 4);
+  if (version != kVersion) throw AgentError("checkpoint " + name + " has another format version");
+  const std::span<const std::uint8_t> body(data.data() + 8, data.size() - 12);
+  SectionReader in(body, name);
+  if (values_of<std::int64_t>(in.next()) != architecture(config_)) {
+    throw AgentError("checkpoint " + name +
+                     " was written by a model of other sizes or another "
+                     "intrinsic method; use the same preset and intrinsic.* settings");
+  }
+  const std::span<const std::uint8_t> params = in.next();
+  std::vector<std::span<const std::uint8_t>> opt_states;
+  for (std::size_t i = 0; i < optimizers().size(); ++i) opt_states.push_back(in.next());
+  const std::vector<float> norms = values_of<float>(in.next());
+  const std::span<const std::uint8_t> rng_bytes = in.next();
+  const std::vector<std::int64_t> counters = values_of<std::int64_t>(in.next());
+  if (rng_bytes.size() != sizeof(nn::Rng) || counters.size() != 2 || norms.empty()) {
+    throw AgentError("checkpoint " + name + " has malformed state sections");
+  }
+  try {
+    std::vector<nn::ParamGroup*> g = groups();
+    nn::load_params(params, std::span<nn::ParamGroup* const>(g));
+    for (std::size_t i = 0; i < opt_states.size(); ++i) optimizers()[i]->load_state(opt_states[i]);
+  } catch (const nn::SerializationError& e) {
+    throw AgentError("checkpoint " + name + " does not fit this agent: " + e.what());
+  }
+  const std::size_t intrinsic_size = intrinsic_->normalizer_state().size();
+  if (norms.size() != intrinsic_size + 1 + 4) {
+    throw AgentError("checkpoint " + name + " has normaliser state of another size");
+  }
+  if (intrinsic_size > 0)
+    intrinsic_->set_normalizer_state(std::span(norms).subspan(0, intrinsic_size));
+  expl_->return_normalizer().set_state(std::span(norms).subspan(intrinsic_size + 1, 2));
+  task_->return_normalizer().set_state(std::span(norms).subspan(intrinsic_size + 3, 2));
+  std::memcpy(&rng_, rng_bytes.data(), sizeof(nn::Rng));
+  train_steps_ = counters[0];
+  task_actor_initialised_ = counters[1] != 0;
+  // Loading a pretraining checkpoint into a finetune agent starts the task actor from the
+  // pretrained exploration actor.
+  if (config_.phase == Phase::kFinetune && !task_actor_initialised_) set_phase(Phase::kFinetune);
+}
+
+}  // namespace indrive::agent

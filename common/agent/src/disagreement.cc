@@ -1,0 +1,103 @@
+#include "indrive/agent/disagreement.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "indrive/basics/check.h"
+#include "intrinsic_math.h"
+
+namespace indrive::agent {
+
+using nn::Shape;
+using nn::Tensor;
+using namespace intrinsic_math;
+
+LatentDisagreement::LatentDisagreement(const IntrinsicConfig& config, const WorldModelConfig& model,
+                                       nn::Rng& rng)
+    : IntrinsicModule(config), classes_(model.classes) {
+  for (int k = 0; k < config.ensemble; ++k) {
+    members_.emplace_back(
+        params_, "ld.member" + std::to_string(k), model.feat_dim() + kNumActions,
+        nn::MlpOptions{.units = config.units, .layers = config.layers, .out = model.stoch_dim()},
+        rng);
+  }
+  make_optimizer();
+}
+
+Tensor LatentDisagreement::predict(int k, Tensor input) {
+  Tensor logits = members_[k](input);
+  const std::int64_t n = logits.dim(0), s = logits.dim(1);
+  Tensor probs = nn::softmax(nn::reshape(logits, Shape{n * s / classes_, classes_}));
+  return nn::reshape(probs, Shape{n, s});
+}
+
+Tensor LatentDisagreement::loss(const Transitions& batch) {
+  Tensor input = nn::concat({batch.feat, batch.action}, -1);
+  const std::int64_t n = input.dim(0), s = batch.next_post.dim(1);
+  Tensor target = nn::reshape(batch.next_post, Shape{n * s / classes_, classes_});
+  Tensor total;
+  for (int k = 0; k < members(); ++k) {
+    Tensor logits = members_[k](input);
+    Tensor logp = nn::log_softmax(nn::reshape(logits, Shape{n * s / classes_, classes_}));
+    // Cross-entropy to the next posterior, summed over the latent groups.
+    Tensor ce = nn::scale(row_sum(nn::reshape(nn::mul(target, logp), Shape{n, s})), -1.0f);
+    Tensor member_loss = masked_mean(ce, batch.mask);
+    total = total.defined() ? nn::add(total, member_loss) : member_loss;
+  }
+  last_loss_ = total.item() / members();
+  return total;
+}
+
+std::vector<float> LatentDisagreement::reward(Tensor feat, Tensor action, Tensor next_feat) {
+  (void)next_feat;
+  nn::NoGradGuard no_grad;
+  nn::Graph& graph = nn::current_graph();
+  const std::int64_t n = feat.dim(0);
+  // Rows are scored in chunks whose activations are given back to the arena after each chunk:
+  // the K members' hidden layers and softmaxes over all H * N imagined states would otherwise
+  // take over a gigabyte that is written once and read once.
+  constexpr std::int64_t kChunkRows = 1024;
+  std::vector<float> out(n);
+  std::vector<float> mean, var;
+  const float inv_k = 1.0f / static_cast<float>(members());
+  std::vector<Tensor> preds(members());
+  for (std::int64_t r0 = 0; r0 < n; r0 += kChunkRows) {
+    const std::int64_t r1 = std::min(n, r0 + kChunkRows);
+    const nn::Graph::Mark mark = graph.mark();
+    Tensor input = nn::concat({nn::slice(feat, r0, r1, 0), nn::slice(action, r0, r1, 0)}, -1);
+    for (int k = 0; k < members(); ++k) preds[k] = predict(k, input);
+    const std::int64_t s = preds[0].dim(1);
+    mean.resize(s);
+    var.resize(s);
+    for (std::int64_t i = r0; i < r1; ++i) {
+      const std::int64_t row = (i - r0) * s;
+      // Per latent d: mean and population variance across the members, summed in member order.
+      std::fill(mean.begin(), mean.end(), 0.0f);
+      for (const Tensor& p : preds) {
+        const float* pr = p.data() + row;
+        for (std::int64_t d = 0; d < s; ++d) mean[d] += pr[d];
+      }
+      for (std::int64_t d = 0; d < s; ++d) mean[d] *= inv_k;
+      std::fill(var.begin(), var.end(), 0.0f);
+      for (const Tensor& p : preds) {
+        const float* pr = p.data() + row;
+        for (std::int64_t d = 0; d < s; ++d) {
+          const float diff = pr[d] - mean[d];
+          var[d] += diff * diff;
+        }
+      }
+      double total = 0.0;
+      for (std::int64_t d = 0; d < s; ++d) {
+        const float v = var[d] * inv_k;
+        total += config_.disag_reward == DisagReward::kVariance ? v : std::sqrt(v);
+      }
+      out[i] = static_cast<float>(total / s);
+    }
+    for (Tensor& p : preds) p = Tensor();
+    graph.rewind(mark);
+  }
+  scale_raw(out, config_.disag_scale);
+  return out;
+}
+
+}  // namespace indrive::agent

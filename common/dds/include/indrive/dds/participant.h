@@ -1,0 +1,321 @@
+// A small RAII layer over Fast DDS 2.9: one participant per process, typed writers and readers
+// whose QoS comes from XML profiles by name (deploy/dds/*.xml), never from code.
+//
+//   indrive::dds::Participant participant({.domain_id = 7, .profiles_file = flags.dds_profiles});
+//   auto writer = participant.make_writer<indrive::msg::PolicySnapshot>();
+//   auto reader = participant.make_reader<indrive::msg::TrajectoryChunk>(
+//       [&](const indrive::msg::TrajectoryChunk& chunk) { ... });   // on a DDS thread
+//   indrive::dds::seal(snapshot);
+//   writer->write(snapshot);
+//
+// Topic names and profile names default to TopicTraits<T> (messages.h). Writers and
+// readers must be destroyed before their participant. Setup failures throw DdsError with a
+// message that says what to fix; Fast DDS's own log lines go to the project's log sink.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+#include "indrive/basics/log.h"
+#include "indrive/dds/messages.h"
+
+namespace indrive::config {
+class Config;
+class Schema;
+}  // namespace indrive::config
+
+namespace indrive::dds {
+
+// A DDS entity could not be set up (bad profiles file, unknown profile, domain, ...).
+class DdsError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Name of the environment variable Fast DDS reads its default XML profiles file from.
+inline constexpr const char* kProfilesEnvVar = "FASTRTPS_DEFAULT_PROFILES_FILE";
+
+// Name of the environment variable that gives the discovery server's HOST:PORT when neither
+// the --discovery-server flag nor the dds.discovery_server key does.
+inline constexpr const char* kDiscoveryServerEnvVar = "INDRIVE_DISCOVERY_SERVER";
+
+// Port of a discovery server when HOST is given without one (Fast DDS's default).
+inline constexpr int kDefaultDiscoveryPort = 11811;
+
+struct ParticipantOptions {
+  int domain_id = 0;
+  // XML profiles file; empty means the file named by FASTRTPS_DEFAULT_PROFILES_FILE.
+  std::string profiles_file{};
+  // <participant> profile in that file.
+  std::string participant_profile = "indrive_participant";
+  // HOST:PORT (or HOST) of the discovery server, replacing the address the profile names;
+  // the profile must be a discovery-server client (deploy/dds/discovery_server.xml). Empty:
+  // $INDRIVE_DISCOVERY_SERVER, and when that is unset too, the profile's own address.
+  std::string discovery_server{};
+  // Folder made by deploy/dds/make_security.sh; empty: no DDS Security (security.h).
+  std::string security_dir{};
+  // Role whose certificate and permissions the participant uses with security_dir.
+  std::string security_role{};
+};
+
+// A discovery server's address: `host` as given, `ipv4` the address it resolved to, and
+// where it was given (the flag or the environment variable).
+struct ServerAddress {
+  std::string host;
+  std::string ipv4;
+  int port = kDefaultDiscoveryPort;
+  std::string source;
+  // "HOST:PORT", with " (IP)" when HOST is a name, and " from SOURCE".
+  std::string describe() const;
+};
+
+// Parses "HOST:PORT" or "HOST" and resolves HOST (a name or a dotted IPv4 address) to IPv4;
+// throws DdsError naming `source` (the flag or variable it came from) when it cannot.
+ServerAddress parse_discovery_server(const std::string& text, const std::string& source);
+
+// The discovery server a participant uses: `configured` (ParticipantOptions::discovery_server)
+// if not empty, else $INDRIVE_DISCOVERY_SERVER; nullopt when neither names one.
+std::optional<ServerAddress> resolve_discovery_server(const std::string& configured);
+
+// Declares the dds.* configuration keys (domain_id, profiles_file, participant_profile).
+void declare_config(config::Schema& schema);
+
+// Participant options from the dds.* keys of a resolved config.
+ParticipantOptions participant_options(const config::Config& config);
+
+// The command-line flag that names the profiles file, as an alias of dds.profiles_file for
+// config::parse_command_line.
+inline const std::pair<std::string, std::string> kProfilesFlag{"--dds-profiles",
+                                                               "dds.profiles_file"};
+
+// Returns the profiles file to load: explicit_path if not empty, else the environment
+// variable's value; throws DdsError when neither is set or the file does not exist.
+std::filesystem::path resolve_profiles_file(const std::string& explicit_path);
+
+// Routes Fast DDS's log output to the project's log sink (category "fastdds"); idempotent.
+void route_fastdds_log();
+
+// Typed writer for one topic. Create it with Participant::make_writer.
+template <typename T>
+class Writer {
+ public:
+  Writer(eprosima::fastdds::dds::Publisher* publisher, eprosima::fastdds::dds::DataWriter* writer,
+         std::shared_ptr<std::atomic<int>> live_endpoints)
+      : publisher_(publisher), writer_(writer), live_endpoints_(std::move(live_endpoints)) {
+    live_endpoints_->fetch_add(1);
+  }
+  ~Writer() {
+    publisher_->delete_datawriter(writer_);
+    live_endpoints_->fetch_sub(1);
+  }
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
+
+  // Publishes one sample; returns false when it could not be queued, e.g. a KEEP_ALL history
+  // is full because readers have not acknowledged enough yet (back-pressure): retry later.
+  bool write(const T& sample) { return writer_->write(const_cast<T*>(&sample)); }
+
+  // Number of readers currently matched.
+  int matched() const {
+    eprosima::fastdds::dds::PublicationMatchedStatus status;
+    writer_->get_publication_matched_status(status);
+    return status.current_count;
+  }
+
+  // Waits until at least `count` readers are matched; false on timeout.
+  bool wait_for_matched(int count, std::chrono::milliseconds timeout) const;
+
+  // Waits until every matched reliable reader acknowledged every sample; false on timeout.
+  bool wait_for_acknowledgments(std::chrono::milliseconds timeout) {
+    return writer_->wait_for_acknowledgments(to_duration(timeout)) ==
+           eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK;
+  }
+
+  // The underlying Fast DDS writer, for what this wrapper does not cover.
+  eprosima::fastdds::dds::DataWriter* native() { return writer_; }
+
+ private:
+  static eprosima::fastrtps::Duration_t to_duration(std::chrono::milliseconds timeout) {
+    return eprosima::fastrtps::Duration_t(static_cast<double>(timeout.count()) / 1000.0);
+  }
+  eprosima::fastdds::dds::Publisher* publisher_;
+  eprosima::fastdds::dds::DataWriter* writer_;
+  std::shared_ptr<std::atomic<int>> live_endpoints_;
+};
+
+// Typed reader for one topic that calls a function for each sample as it arrives (on a Fast
+// DDS thread; the function must be thread-safe with respect to the caller's other threads).
+// Create it with Participant::make_reader.
+template <typename T>
+class Reader : public eprosima::fastdds::dds::DataReaderListener {
+ public:
+  using Callback = std::function<void(const T&)>;
+
+  explicit Reader(Callback callback) : callback_(std::move(callback)) {}
+  ~Reader() override {
+    if (reader_ != nullptr) {
+      reader_->set_listener(nullptr);
+      subscriber_->delete_datareader(reader_);
+      live_endpoints_->fetch_sub(1);
+    }
+  }
+  Reader(const Reader&) = delete;
+  Reader& operator=(const Reader&) = delete;
+
+  // Number of writers currently matched.
+  int matched() const {
+    eprosima::fastdds::dds::SubscriptionMatchedStatus status;
+    reader_->get_subscription_matched_status(status);
+    return status.current_count;
+  }
+
+  // Waits until at least `count` writers are matched; false on timeout.
+  bool wait_for_matched(int count, std::chrono::milliseconds timeout) const;
+
+  // Samples whose callback threw; they are logged and skipped, never propagated.
+  std::uint64_t callback_failures() const { return callback_failures_.load(); }
+
+  // The underlying Fast DDS reader, for what this wrapper does not cover.
+  eprosima::fastdds::dds::DataReader* native() { return reader_; }
+
+  // Takes every available sample and hands each valid one to the callback.
+  void on_data_available(eprosima::fastdds::dds::DataReader* reader) override {
+    std::lock_guard<std::mutex> lock(take_mutex_);
+    eprosima::fastdds::dds::SampleInfo info;
+    while (reader->take_next_sample(&sample_, &info) ==
+           eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      try {
+        callback_(sample_);
+      } catch (const std::exception& error) {
+        callback_failures_.fetch_add(1);
+        INDRIVE_LOG(kError, "dds")
+            << "reader callback failed on " << reader->get_topicdescription()->get_name() << ": "
+            << error.what();
+      }
+    }
+  }
+
+ private:
+  friend class Participant;
+  void attach(eprosima::fastdds::dds::Subscriber* subscriber,
+              eprosima::fastdds::dds::DataReader* reader,
+              std::shared_ptr<std::atomic<int>> live_endpoints) {
+    subscriber_ = subscriber;
+    reader_ = reader;
+    live_endpoints_ = std::move(live_endpoints);
+    live_endpoints_->fetch_add(1);
+  }
+
+  Callback callback_;
+  eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
+  eprosima::fastdds::dds::DataReader* reader_ = nullptr;
+  std::shared_ptr<std::atomic<int>> live_endpoints_;
+  std::mutex take_mutex_;
+  T sample_;  // reused, so its sequences keep their capacity between samples
+  std::atomic<std::uint64_t> callback_failures_{0};
+};
+
+// One DomainParticipant with one Publisher and one Subscriber.
+class Participant {
+ public:
+  // Loads the profiles file and creates the participant; throws DdsError on failure.
+  explicit Participant(const ParticipantOptions& options);
+  ~Participant();
+  Participant(const Participant&) = delete;
+  Participant& operator=(const Participant&) = delete;
+
+  // Creates a writer on `topic` with the QoS of the XML <data_writer> profile `profile`.
+  template <typename T>
+  std::unique_ptr<Writer<T>> make_writer(
+      const std::string& topic = TopicTraits<T>::kTopic,
+      const std::string& profile = TopicTraits<T>::kWriterProfile) {
+    auto* topic_entity = find_or_create_topic<T>(topic);
+    return std::make_unique<Writer<T>>(publisher_, create_writer(topic_entity, profile),
+                                       live_endpoints_);
+  }
+
+  // Creates a reader on `topic` with the QoS of the XML <data_reader> profile `profile`;
+  // on_sample is called for every sample taken.
+  template <typename T>
+  std::unique_ptr<Reader<T>> make_reader(
+      typename Reader<T>::Callback on_sample, const std::string& topic = TopicTraits<T>::kTopic,
+      const std::string& profile = TopicTraits<T>::kReaderProfile) {
+    auto* topic_entity = find_or_create_topic<T>(topic);
+    auto reader = std::make_unique<Reader<T>>(std::move(on_sample));
+    reader->attach(subscriber_, create_reader(topic_entity, profile, reader.get()),
+                   live_endpoints_);
+    return reader;
+  }
+
+  // The profiles file this participant was configured from.
+  const std::filesystem::path& profiles_file() const { return profiles_file_; }
+  int domain_id() const { return domain_id_; }
+  // Whether the profile gives this participant a shared-memory transport (explicitly or through
+  // Fast DDS's builtin transports).
+  bool uses_shared_memory() const { return uses_shared_memory_; }
+  // The underlying Fast DDS participant, for what this wrapper does not cover.
+  eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
+
+ private:
+  template <typename T>
+  eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& topic) {
+    eprosima::fastdds::dds::TypeSupport type(new typename TopicTraits<T>::PubSubType());
+    return find_or_create_topic(topic, type);
+  }
+  eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& topic,
+                                                      eprosima::fastdds::dds::TypeSupport type);
+  eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic,
+                                                    const std::string& profile);
+  eprosima::fastdds::dds::DataReader* create_reader(
+      eprosima::fastdds::dds::Topic* topic, const std::string& profile,
+      eprosima::fastdds::dds::DataReaderListener* listener);
+
+  std::filesystem::path profiles_file_;
+  int domain_id_ = 0;
+  bool uses_shared_memory_ = false;
+  eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
+  eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
+  eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
+  std::mutex topics_mutex_;
+  std::map<std::string, eprosima::fastdds::dds::Topic*> topics_;
+  // Writers and readers alive on this participant; it must outlive them.
+  std::shared_ptr<std::atomic<int>> live_endpoints_ = std::make_shared<std::atomic<int>>(0);
+};
+
+namespace detail {
+// Polls `current()` until it reaches `count` or the timeout passes.
+bool wait_for_count(const std::function<int()>& current, int count,
+                    std::chrono::milliseconds timeout);
+}  // namespace detail
+
+template <typename T>
+bool Writer<T>::wait_for_matched(int count, std::chrono::milliseconds timeout) const {
+  return detail::wait_for_count([this] { return matched(); }, count, timeout);
+}
+
+template <typename T>
+bool Reader<T>::wait_for_matched(int count, std::chrono::milliseconds timeout) const {
+  return detail::wait_for_count([this] { return matched(); }, count, timeout);
+}
+
+}  // namespace indrive::dds

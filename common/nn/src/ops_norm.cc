@@ -1,0 +1,271 @@
+// LayerNorm, softmax and log-softmax over the last axis.
+#include <cmath>
+#include <vector>
+
+#include "indrive/nn/ops.h"
+#include "ops_internal.h"
+
+namespace indrive::nn {
+
+using detail::grad_of;
+using detail::Node;
+
+namespace {
+
+// Rows per chunk of the LayerNorm loops: fixed, so the parallel split (and the order in which
+// the per-chunk scale/offset gradients are summed) does not depend on the thread count.
+constexpr std::int64_t kNormChunkRows = 512;
+
+// Calls fn(row_begin, row_end, chunk) over chunks of rows, in parallel when large.
+template <typename Fn>
+void for_row_chunks(std::int64_t rows, std::int64_t cols, Fn&& fn) {
+  const std::int64_t chunks = (rows + kNormChunkRows - 1) / kNormChunkRows;
+  const bool parallel = rows * cols >= detail::kParallelMin && chunks > 1 &&
+                        omp_get_max_threads() > 1 && !omp_in_parallel();
+#pragma omp parallel for schedule(dynamic, 1) if (parallel)
+  for (std::int64_t c = 0; c < chunks; ++c)
+    fn(c * kNormChunkRows, std::min(rows, (c + 1) * kNormChunkRows), c);
+}
+
+// Shared by layer_norm and layer_norm_silu. Inputs: x (R, C), gamma (C) or null, beta (C) or
+// null. saved: mean[R], rstd[R]. iparam[0]: 1 when SiLU follows the norm.
+void layer_norm_backward(Node& n) {
+  Node* x = n.in[0];
+  Node* gamma = n.in[1];
+  Node* beta = n.in[2];
+  const bool with_silu = n.iparam[0] != 0;
+  const std::int64_t rows = n.shape.rows(), cols = n.shape.cols();
+  const float* mean = n.saved;
+  const float* rstd = n.saved + rows;
+  bool fresh = false;
+  float* gx = detail::grad_for_write(x, &fresh);
+  float* gg = grad_of(gamma);
+  float* gb = grad_of(beta);
+  const float* gam = gamma ? gamma->value : nullptr;
+  const float* bet = beta ? beta->value : nullptr;
+  const float inv_c = 1.0f / static_cast<float>(cols);
+  const std::int64_t chunks = (rows + kNormChunkRows - 1) / kNormChunkRows;
+  // Per-chunk partial sums of the scale and offset gradients, reduced in chunk order below.
+  float* partial = (gg || gb) ? current_graph().alloc_zeroed(chunks * 2 * cols) : nullptr;
+  for_row_chunks(rows, cols, [&](std::int64_t r0, std::int64_t r1, std::int64_t chunk) {
+    float* pg = partial ? partial + chunk * 2 * cols : nullptr;
+    float* pb = partial ? pg + cols : nullptr;
+    // Chunk buffers: normalised x and the gradient w.r.t. the norm's output, computed for the
+    // whole chunk at once so that the SiLU derivative runs vectorised.
+    const std::int64_t count = (r1 - r0) * cols;
+    thread_local std::vector<float> buffers;
+    if (buffers.size() < static_cast<std::size_t>(2 * count)) buffers.resize(2 * count);
+    float* xh_chunk = buffers.data();
+    float* g_chunk = xh_chunk + count;
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* xr = x->value + r * cols;
+      float* xh = xh_chunk + (r - r0) * cols;
+      const float mu = mean[r], rs = rstd[r];
+      for (std::int64_t c = 0; c < cols; ++c) xh[c] = (xr[c] - mu) * rs;
+    }
+    const float* gy_chunk = n.grad + r0 * cols;
+    if (with_silu) {
+      // Recompute the norm's output v, then g = gy * d silu(v) / dv = gy s (1 + v (1 - s)).
+      for (std::int64_t i = 0; i < count; i += cols)
+        for (std::int64_t c = 0; c < cols; ++c) {
+          float v = xh_chunk[i + c];
+          if (gam) v *= gam[c];
+          if (bet) v += bet[c];
+          g_chunk[i + c] = v;
+        }
+      detail::Array v(g_chunk, count);
+      const detail::ConstArray gy(gy_chunk, count);
+      v = gy * v.logistic() * (1.0f + v * (1.0f - v.logistic()));
+    } else {
+      std::copy_n(gy_chunk, count, g_chunk);
+    }
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* xh = xh_chunk + (r - r0) * cols;
+      const float* g = g_chunk + (r - r0) * cols;
+      const float rs = rstd[r];
+      // dxhat = g * gamma; dx = rstd * (dxhat - mean(dxhat) - xhat * mean(dxhat * xhat)).
+      float sum_d = 0.0f, sum_dx = 0.0f;
+      for (std::int64_t c = 0; c < cols; ++c) {
+        const float d = gam ? g[c] * gam[c] : g[c];
+        sum_d += d;
+        sum_dx += d * xh[c];
+      }
+      if (pg) {
+        for (std::int64_t c = 0; c < cols; ++c) pg[c] += g[c] * xh[c];
+        for (std::int64_t c = 0; c < cols; ++c) pb[c] += g[c];
+      }
+      if (gx) {
+        float* gxr = gx + r * cols;
+        const float md = sum_d * inv_c, mdx = sum_dx * inv_c;
+        if (fresh) {
+          for (std::int64_t c = 0; c < cols; ++c) {
+            const float d = gam ? g[c] * gam[c] : g[c];
+            gxr[c] = rs * (d - md - xh[c] * mdx);
+          }
+        } else {
+          for (std::int64_t c = 0; c < cols; ++c) {
+            const float d = gam ? g[c] * gam[c] : g[c];
+            gxr[c] += rs * (d - md - xh[c] * mdx);
+          }
+        }
+      }
+    }
+  });
+  if (partial) {
+    for (std::int64_t chunk = 0; chunk < chunks; ++chunk) {
+      const float* pg = partial + chunk * 2 * cols;
+      if (gg)
+        for (std::int64_t c = 0; c < cols; ++c) gg[c] += pg[c];
+      if (gb)
+        for (std::int64_t c = 0; c < cols; ++c) gb[c] += pg[cols + c];
+    }
+  }
+}
+
+Tensor layer_norm_impl(Tensor x, Tensor gamma, Tensor beta, float eps, bool with_silu) {
+  const std::int64_t rows = x.rows(), cols = x.cols();
+  if (gamma.defined()) INDRIVE_CHECK_EQ(gamma.numel(), cols) << "LayerNorm scale";
+  if (beta.defined()) INDRIVE_CHECK_EQ(beta.numel(), cols) << "LayerNorm offset";
+  Graph& g = current_graph();
+  Node* n = g.new_node(x.shape());
+  n->saved = g.alloc(2 * rows);
+  n->iparam[0] = with_silu ? 1 : 0;
+  float* mean = n->saved;
+  float* rstd = n->saved + rows;
+  const float* gam = gamma.defined() ? gamma.data() : nullptr;
+  const float* bet = beta.defined() ? beta.data() : nullptr;
+  const float* xv = x.data();
+  float* y = n->value;
+  const float inv_c = 1.0f / static_cast<float>(cols);
+  for_row_chunks(rows, cols, [&](std::int64_t r0, std::int64_t r1, std::int64_t) {
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* xr = xv + r * cols;
+      float* yr = y + r * cols;
+      float mu = 0.0f;
+      for (std::int64_t c = 0; c < cols; ++c) mu += xr[c];
+      mu *= inv_c;
+      float var = 0.0f;
+      for (std::int64_t c = 0; c < cols; ++c) var += (xr[c] - mu) * (xr[c] - mu);
+      var *= inv_c;
+      const float rs = 1.0f / std::sqrt(var + eps);
+      mean[r] = mu;
+      rstd[r] = rs;
+      for (std::int64_t c = 0; c < cols; ++c) {
+        float v = (xr[c] - mu) * rs;
+        if (gam) v *= gam[c];
+        if (bet) v += bet[c];
+        yr[c] = v;
+      }
+      if (with_silu) {
+        auto out = detail::Array(yr, cols);
+        out = out * out.logistic();
+      }
+    }
+  });
+  g.record(
+      n, layer_norm_backward,
+      {x.node(), gamma.defined() ? gamma.node() : nullptr, beta.defined() ? beta.node() : nullptr});
+  return Tensor(n);
+}
+
+}  // namespace
+
+Tensor layer_norm(Tensor x, Tensor gamma, Tensor beta, float eps) {
+  return layer_norm_impl(x, gamma, beta, eps, false);
+}
+
+Tensor layer_norm_silu(Tensor x, Tensor gamma, Tensor beta, float eps) {
+  return layer_norm_impl(x, gamma, beta, eps, true);
+}
+
+namespace {
+
+// Calls fn(r0, r1) over row ranges that together cover [0, rows); the ranges are whole rows of
+// the fixed element chunks of parallel_for, so they do not depend on the thread count.
+template <typename Fn>
+void for_rows(std::int64_t rows, std::int64_t cols, Fn&& fn) {
+  detail::parallel_for(rows * cols, [&](std::int64_t s, std::int64_t e) {
+    const std::int64_t r0 = (s + cols - 1) / cols, r1 = (e + cols - 1) / cols;
+    if (r0 < r1) fn(r0, r1);
+  });
+}
+
+void softmax_backward(Node& n) {
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
+  if (gx == nullptr) return;
+  const std::int64_t rows = n.shape.rows(), cols = n.shape.cols();
+  for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* y = n.value + r * cols;
+      const float* gy = n.grad + r * cols;
+      float dot = 0.0f;
+      for (std::int64_t c = 0; c < cols; ++c) dot += gy[c] * y[c];
+      float* g = gx + r * cols;
+      if (fresh)
+        for (std::int64_t c = 0; c < cols; ++c) g[c] = y[c] * (gy[c] - dot);
+      else
+        for (std::int64_t c = 0; c < cols; ++c) g[c] += y[c] * (gy[c] - dot);
+    }
+  });
+}
+
+void log_softmax_backward(Node& n) {
+  bool fresh = false;
+  float* gx = detail::grad_for_write(n.in[0], &fresh);
+  if (gx == nullptr) return;
+  const std::int64_t rows = n.shape.rows(), cols = n.shape.cols();
+  for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* y = n.value + r * cols;
+      const float* gy = n.grad + r * cols;
+      float total = 0.0f;
+      for (std::int64_t c = 0; c < cols; ++c) total += gy[c];
+      float* g = gx + r * cols;
+      if (fresh)
+        for (std::int64_t c = 0; c < cols; ++c) g[c] = gy[c] - std::exp(y[c]) * total;
+      else
+        for (std::int64_t c = 0; c < cols; ++c) g[c] += gy[c] - std::exp(y[c]) * total;
+    }
+  });
+}
+
+// Writes softmax (or log-softmax) of each row of x into y.
+void softmax_rows(const float* x, float* y, std::int64_t rows, std::int64_t cols, bool log) {
+  for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
+    for (std::int64_t r = r0; r < r1; ++r) {
+      const float* xr = x + r * cols;
+      float* yr = y + r * cols;
+      float mx = xr[0];
+      for (std::int64_t c = 1; c < cols; ++c) mx = std::max(mx, xr[c]);
+      auto in = detail::ConstArray(xr, cols);
+      auto out = detail::Array(yr, cols);
+      out = (in - mx).exp();
+      const float total = out.sum();
+      if (log)
+        out = in - (mx + std::log(total));
+      else
+        out *= 1.0f / total;
+    }
+  });
+}
+
+}  // namespace
+
+Tensor softmax(Tensor x) {
+  Graph& g = current_graph();
+  Node* n = g.new_node(x.shape());
+  softmax_rows(x.data(), n->value, x.rows(), x.cols(), false);
+  g.record(n, softmax_backward, {x.node()});
+  return Tensor(n);
+}
+
+Tensor log_softmax(Tensor x) {
+  Graph& g = current_graph();
+  Node* n = g.new_node(x.shape());
+  softmax_rows(x.data(), n->value, x.rows(), x.cols(), true);
+  g.record(n, log_softmax_backward, {x.node()});
+  return Tensor(n);
+}
+
+}  // namespace indrive::nn

@@ -1,0 +1,28 @@
+// The command line both service executables share (fixed by `indrive launch`):
+//   --config FILE --run-dir DIR --domain N [--dds-profile XML] [--set key=value]...
+//   [--check-config]
+// plus a stop flag that SIGINT and SIGTERM set.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <string>
+
+#include "indrive/service/run_config.h"
+
+namespace indrive::service {
+
+// Adds the shared options to `app`, writing into `options` and `log_level`.
+void add_service_options(CLI::App& app, ServiceOptions& options, std::string& log_level);
+
+// One line that says what a process would run with (run id, preset, phase, domain, DDS
+// profile, discovery server, security role and folder); throws dds::DdsError when the profiles
+// file cannot be found or, with --dds-security, when a security file of `own_role` (the
+// program's role unless dds.security_role says otherwise) is missing, expired or wrongly
+// signed. Printed by --check-config, which validates a command line without starting anything.
+std::string check_summary(const ServiceConfig& config, const std::string& own_role);
+
+// Installs SIGINT/SIGTERM handlers that set the returned flag (once per process).
+const std::atomic<bool>& install_stop_signals();
+
+}  // namespace indrive::service

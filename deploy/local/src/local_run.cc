@@ -1,0 +1,432 @@
+#include "indrive/local/local_run.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "indrive/actor/env_adapter.h"
+#include "indrive/actor/policies.h"
+#include "indrive/actor/protocol.h"
+#include "indrive/actor/protocol_episode.h"
+#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/snapshot_file.h"
+#include "indrive/agent/local_trainer.h"
+#include "indrive/basics/check.h"
+#include "indrive/basics/episode_csv.h"
+#include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/envserver/town.h"
+#include "indrive/learner/learner.h"
+#include "indrive/nn/kernels.h"
+
+namespace indrive::local {
+namespace fs = std::filesystem;
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+RunDir open_run(const service::ServiceConfig& config) {
+  return RunDir::open_or_create(
+      config.run_dir().parent_path().empty() ? fs::path(".") : config.run_dir().parent_path(),
+      config.run_id());
+}
+
+// The agent's config for this process: random mode never leaves prefill, so it never trains.
+// A finetune without a checkpoint to start from is refused here, before SUMO starts.
+agent::AgentConfig local_agent_config(const service::ServiceConfig& config) {
+  agent::AgentConfig agent = config.agent();
+  const bool resumable = CheckpointFiles(open_run(config).checkpoints(), 1000).newest().has_value();
+  if (agent.phase == agent::Phase::kFinetune && !config.config().get<bool>("local.random") &&
+      !resumable && config.config().get<std::string>("learner.init_checkpoint").empty()) {
+    throw LocalRunError(
+        "finetune needs a pretrained agent: set learner.init_checkpoint to a pretraining "
+        "run's checkpoint, e.g. --set learner.init_checkpoint=runs/<run>/checkpoints/"
+        "ckpt-000000000100.bin");
+  }
+  if (config.config().get<bool>("local.random")) {
+    agent.replay.prefill = std::numeric_limits<std::int64_t>::max();
+  }
+  return agent;
+}
+
+// Loads agent checkpoint bytes (the agent's own format) into `load`, through a staging file.
+void with_staged_agent(const fs::path& folder, const std::vector<std::uint8_t>& agent_bytes,
+                       const std::function<void(const fs::path& dir)>& load) {
+  const fs::path staging = folder / "agent-staging";
+  fs::create_directories(staging);
+  atomic_write(staging / "agent.ckpt", agent_bytes);
+  try {
+    load(staging);
+  } catch (...) {
+    fs::remove_all(staging);
+    throw;
+  }
+  fs::remove_all(staging);
+}
+
+// The agent bytes of a checkpoint file: a learner checkpoint (counters + agent) or a bare agent
+// checkpoint. Returns the counters (zero for a bare one).
+learner::LearnerCounters read_checkpoint(const fs::path& path,
+                                         std::vector<std::uint8_t>& agent_bytes) {
+  const auto bytes = read_file(path);
+  try {
+    return learner::unpack_checkpoint(bytes, agent_bytes);
+  } catch (const learner::CheckpointError&) {
+    agent_bytes = bytes;
+    return {};
+  }
+}
+
+// The environment, started on the first reset: a run that only reloads or reports never
+// starts SUMO (libsumo allows one simulation per process).
+class LazyEnvironment : public agent::Environment {
+ public:
+  LazyEnvironment(const service::ServiceConfig& config,
+                  std::function<void(const env::StepResult&)> observer)
+      : config_(config), observer_(std::move(observer)) {}
+
+  agent::EnvStep reset() override {
+    if (!adapter_) {
+      env_ = std::make_unique<env::Env>(actor::env_config(config_));
+      adapter_ =
+          std::make_unique<actor::EnvAdapter>(*env_, actor::EnvAdapter::options_from(config_));
+      adapter_->on_result(observer_);
+    }
+    return adapter_->reset();
+  }
+  agent::EnvStep step(int action) override { return adapter_->step(action); }
+
+ private:
+  const service::ServiceConfig& config_;
+  std::function<void(const env::StepResult&)> observer_;
+  std::unique_ptr<env::Env> env_;
+  std::unique_ptr<actor::EnvAdapter> adapter_;
+};
+
+std::string method_name(const service::ServiceConfig& config, const agent::AgentConfig& agent) {
+  if (config.config().get<bool>("local.random")) return "random";
+  if (agent.phase == agent::Phase::kDreamer) return "dreamer";
+  return std::string(agent::to_string(agent.intrinsic.method));
+}
+
+}  // namespace
+
+struct LocalRun::Impl {
+  explicit Impl(const service::ServiceConfig& service)
+      : config(service),
+        agent_config(local_agent_config(service)),
+        random(service.config().get<bool>("local.random")),
+        run(open_run(service)),
+        checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
+        town(env::load_town(actor::env_config(service).town,
+                            actor::env_config(service).town_options)),
+        coverage(town.net, {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
+        environment(service,
+                    [this](const env::StepResult& result) {
+                      if (result.is_first) close_episode();
+                      coverage.observe(result.ego.pose);
+                    }),
+        trainer(agent_config, environment,
+                {.train_ratio = service.config().get<double>("learner.replay_ratio"),
+                 .snapshot_every = service.config().get<int>("learner.snapshot_every")}),
+        metrics(run.metrics_path()) {
+    const auto& c = service.config();
+    budget = c.get<std::int64_t>("run.budget_env_steps");
+    log_interval_s = c.get<double>("learner.log_interval_s");
+    log_every_steps = c.get<std::int64_t>("learner.log_every_env_steps");
+    checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
+    c.write_yaml(run.config_path());
+    INDRIVE_LOG(kInfo, "local") << nn::kernel_report();
+    resume();
+  }
+
+  void resume() {
+    std::vector<std::uint8_t> agent_bytes;
+    if (const auto newest = checkpoints.newest()) {
+      base = read_checkpoint(*newest, agent_bytes);
+      with_staged_agent(run.checkpoints(), agent_bytes,
+                        [this](const fs::path& dir) { trainer.load(dir); });
+      restore_coverage();
+      INDRIVE_LOG(kInfo, "local") << "resumed from " << newest->string() << " at " << base.env_steps
+                                  << " env steps, " << base.updates << " updates";
+    } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
+               !init.empty()) {
+      if (!fs::exists(init)) {
+        throw LocalRunError("learner.init_checkpoint '" + init +
+                            "' does not exist: point it at a pretraining run's checkpoint "
+                            "(runs/<run>/checkpoints/ckpt-*.bin)");
+      }
+      read_checkpoint(init, agent_bytes);
+      with_staged_agent(run.checkpoints(), agent_bytes,
+                        [this](const fs::path& dir) { trainer.load(dir); });
+      INDRIVE_LOG(kInfo, "local") << "initialised from " << init;
+    }
+    ++base.learner_epoch;
+  }
+
+  // A resumed run continues the coverage of its earlier sessions (coverage.csv).
+  void restore_coverage() {
+    const fs::path file = run.path() / "coverage.csv";
+    if (!fs::exists(file)) return;
+    const env::CoverageCounts counts = env::read_coverage_csv({file});
+    if (counts.segment_m != coverage.options().segment_m) {
+      INDRIVE_LOG(kWarn, "local") << "coverage.csv has " << counts.segment_m
+                                  << " m segments, this run " << coverage.options().segment_m
+                                  << " m: coverage starts afresh";
+      return;
+    }
+    coverage.restore(counts);
+  }
+
+  std::int64_t env_steps() const { return base.env_steps + trainer.counters().env_steps; }
+  std::int64_t updates() const { return base.updates + trainer.counters().updates; }
+
+  void save_checkpoint() {
+    learner::LearnerCounters counters = base;
+    counters.env_steps = env_steps();
+    counters.updates = updates();
+    counters.policy_version = static_cast<std::uint64_t>(counters.updates);
+    const fs::path staging = run.checkpoints() / "agent-staging.bin";
+    trainer.agent().save_checkpoint(staging);
+    const auto agent_bytes = read_file(staging);
+    fs::remove(staging);
+    const fs::path path = checkpoints.save(static_cast<std::uint64_t>(counters.updates),
+                                           learner::pack_checkpoint(counters, agent_bytes));
+    last_checkpoint = Clock::now();
+    INDRIVE_LOG(kInfo, "local") << "checkpoint " << path.filename().string() << " ("
+                                << agent_bytes.size() << " bytes)";
+  }
+
+  void on_update(const agent::TrainMetrics& step) {
+    for (const auto& [name, value] : step) {
+      auto& [sum, count] = interval_sums[name];
+      if (std::isfinite(value)) {
+        sum += value;
+        ++count;
+      } else {
+        ++non_finite;  // counted and logged: a diverging loss must be visible, not averaged in
+      }
+    }
+  }
+
+  void log_metrics() {
+    const double elapsed = std::max(seconds_since(last_log), 1e-9);
+    const std::int64_t steps = env_steps() - logged_steps;
+    const std::int64_t done_updates = updates() - logged_updates;
+    const double per_update =
+        static_cast<double>(agent_config.replay.batch) * agent_config.replay.length;
+    const auto& counters = trainer.counters();
+    nlohmann::json record = {
+        {"env_steps", env_steps()},
+        {"updates", updates()},
+        {"env_steps_per_s", steps / elapsed},
+        {"updates_per_s", done_updates / elapsed},
+        {"replay_ratio", counters.env_steps > 0 ? counters.updates * per_update /
+                                                      static_cast<double>(counters.env_steps)
+                                                : 0.0},
+        {"policy_version", updates()},
+        {"replay_size", trainer.replay().size()},
+        {"episodes", counters.episodes - logged_episodes},
+        {"learner_epoch", base.learner_epoch},
+        {"phase", std::string(agent::to_string(agent_config.phase))},
+        {"random_policy", random},
+        {"non_finite_metrics", non_finite},
+        {"coverage_distinct_per_1k", coverage.distinct_per_window()},
+        {"coverage_fraction_visited", coverage.fraction_visited()},
+        {"coverage_segments_visited", coverage.segments_visited()}};
+    if (counters.episodes > logged_episodes) record["episode_return"] = counters.episode_return;
+    episodes.write(record);  // length and reach, see close_episode()
+    // Training metrics as means over the interval's updates (the learner logs its last update;
+    // a mean is steadier for the few updates of a local run).
+    for (const auto& [name, sum_count] : interval_sums) {
+      if (sum_count.second > 0) record[name] = sum_count.first / sum_count.second;
+    }
+    metrics.write(record);
+
+    std::ostringstream line;
+    line.precision(4);
+    line << "steps " << env_steps() << " | updates " << updates() << " | " << steps / elapsed
+         << " steps/s | " << done_updates / elapsed << " upd/s";
+    for (const char* key : {"wm/recon", "wm/kl", "intrinsic/loss", "expl/reward", "expl/entropy",
+                            "wm/reward", "task/reward", "task/actor_loss", "task/entropy"}) {
+      if (record.contains(key)) line << " | " << key << " " << record[key].get<double>();
+    }
+    line << " | coverage " << coverage.distinct_per_window() << " seg/1k, "
+         << 100.0 * coverage.fraction_visited() << "% of town";
+    if (progress) progress(line.str());
+    interval_sums.clear();
+    last_log = Clock::now();
+    logged_steps = env_steps();
+    logged_updates = updates();
+    logged_episodes = counters.episodes;
+  }
+
+  // Closes the coverage tracker's episode (the steps observed since the last reset) and counts
+  // its length and reach for metrics.jsonl.
+  void close_episode() {
+    const std::size_t closed = coverage.episode_reach().size();
+    coverage.end_episode();
+    if (coverage.episode_reach().size() > closed) {
+      episodes.add(coverage.episode_steps().back(), coverage.episode_reach().back());
+    }
+  }
+
+  void train(const std::atomic<bool>& stop) {
+    last_log = last_checkpoint = Clock::now();
+    logged_steps = env_steps();
+    logged_updates = updates();
+    const auto on_metrics = [this](const agent::TrainMetrics& step) {
+      on_update(step);
+      on_update(trainer.agent().last_timing().as_metrics());
+    };
+    while (!stop.load() && (budget <= 0 || env_steps() < budget)) {
+      // Small slices keep the stop signal, logging and checkpoints responsive.
+      const std::int64_t slice = budget > 0 ? std::min<std::int64_t>(16, budget - env_steps()) : 16;
+      trainer.run(slice, on_metrics);
+      if (seconds_since(last_log) >= log_interval_s ||
+          passed_multiple(logged_steps, env_steps(), log_every_steps)) {
+        log_metrics();
+      }
+      if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
+    }
+    // A session that took no step (budget already reached) leaves the files of the last one.
+    if (trainer.counters().env_steps == 0) return;
+    if (env_steps() != logged_steps) log_metrics();
+    save_checkpoint();
+    // The acting policy as a snapshot file, evaluable without this run directory
+    // (indrive-actor --evaluate --snapshot FILE).
+    actor::write_snapshot_file(run.path() / "snapshot.params", trainer.agent().snapshot(),
+                               agent_config);
+    coverage.write_csv(run.path() / "coverage.csv");
+    INDRIVE_LOG(kInfo, "local") << (stop.load() ? "stopped" : "budget reached") << ": "
+                                << env_steps() << " env steps, " << updates() << " updates, "
+                                << "coverage " << coverage.distinct_per_window()
+                                << " distinct segments per 1k steps, "
+                                << 100.0 * coverage.fraction_visited() << "% of the town";
+  }
+
+  const service::ServiceConfig& config;
+  agent::AgentConfig agent_config;
+  bool random;
+  RunDir run;
+  CheckpointFiles checkpoints;
+  env::Town town;  // for coverage; the Env loads its own copy when it starts
+  env::CoverageTracker coverage;
+  EpisodeStats episodes;  // length and reach of the episodes the coverage tracker closed
+  LazyEnvironment environment;
+  agent::LocalTrainer trainer;
+  MetricsLog metrics;
+  learner::LearnerCounters base;
+  std::int64_t budget = 0;
+  double log_interval_s = 5.0;
+  std::int64_t log_every_steps = 1000;
+  double checkpoint_s = 300.0;
+  std::map<std::string, std::pair<double, std::int64_t>> interval_sums;
+  std::int64_t non_finite = 0;
+  std::function<void(const std::string&)> progress;
+  Clock::time_point last_log{}, last_checkpoint{};
+  std::int64_t logged_steps = 0, logged_updates = 0, logged_episodes = 0;
+};
+
+LocalRun::LocalRun(const service::ServiceConfig& config) : impl_(std::make_unique<Impl>(config)) {}
+LocalRun::~LocalRun() = default;
+void LocalRun::on_progress(std::function<void(const std::string&)> callback) {
+  impl_->progress = std::move(callback);
+}
+void LocalRun::train(const std::atomic<bool>& stop) { impl_->train(stop); }
+void LocalRun::save_checkpoint() { impl_->save_checkpoint(); }
+std::int64_t LocalRun::env_steps() const { return impl_->env_steps(); }
+std::int64_t LocalRun::updates() const { return impl_->updates(); }
+agent::Agent& LocalRun::agent() { return impl_->trainer.agent(); }
+const env::CoverageTracker& LocalRun::coverage() const { return impl_->coverage; }
+
+EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const std::string& route,
+                                   int episodes, const std::atomic<bool>& stop) {
+  const agent::AgentConfig agent_config = config.agent();
+  const bool random = config.config().get<bool>("local.random");
+  const RunDir run = open_run(config);
+
+  // The acting policy of the newest checkpoint, or uniform random actions in random mode, as
+  // the evaluator drives them (one policy seed per episode).
+  std::unique_ptr<actor::EpisodePolicy> policy;
+  long long version = 0;
+  if (random) {
+    policy = actor::make_random_policy(
+        static_cast<std::uint64_t>(config.config().get<std::int64_t>("run.seed")));
+  } else {
+    const auto newest = CheckpointFiles(run.checkpoints(), 1000).newest();
+    if (!newest) {
+      throw LocalRunError("no checkpoint in " + run.checkpoints().string() +
+                          ": train the run first (indrive-train-local without "
+                          "--evaluate-episodes), or pass --random for the random baseline");
+    }
+    std::vector<std::uint8_t> agent_bytes;
+    version = read_checkpoint(*newest, agent_bytes).updates;
+    agent::Agent agent(agent_config);
+    with_staged_agent(run.checkpoints(), agent_bytes,
+                      [&](const fs::path& dir) { agent.load_checkpoint(dir / "agent.ckpt"); });
+    const actor::PolicyHead head = agent_config.phase == agent::Phase::kPretrain
+                                       ? actor::PolicyHead::kExploration
+                                       : actor::PolicyHead::kTask;
+    policy = actor::make_snapshot_policy(agent_config, agent.snapshot(), head, newest->string());
+    INDRIVE_LOG(kInfo, "local") << "evaluating " << agent.acting_actor_group() << " of "
+                                << newest->string();
+  }
+
+  actor::ProtocolGrid grid;
+  const std::string town = config.config().get<std::string>("env.town");
+  grid.towns = {town};
+  grid.routes = {route};
+  grid.densities.clear();
+  for (const double d : config.config().get<std::vector<double>>("eval.densities")) {
+    grid.densities.push_back(static_cast<int>(d));
+  }
+  grid.episodes_per_cell = episodes;
+  grid.validate();
+
+  // As in the evaluator, episodes end at the route's own step budget (below).
+  env::Env env(actor::protocol_env_config(actor::env_config(config)));
+  EpisodeCsvWriter csv(run.eval() /
+                       ("local-" + actor::town_file_label(town) + "-" + route + ".csv"));
+  EvaluationSummary summary;
+  double completion_sum = 0.0, steps_sum = 0.0;
+  const actor::ProtocolEpisodeOptions options =
+      actor::protocol_episode_options(config.config(), run.videos());
+  for (const actor::EpisodeSpec& spec : grid.all_episodes()) {
+    if (stop.load()) break;
+    const actor::EpisodeOutcome outcome =
+        actor::run_protocol_episode(env, *policy, spec, options, stop);
+    if (outcome.stopped) break;
+    EpisodeRecord record = actor::protocol_record(spec, outcome);
+    record.run_id = config.run_id();
+    record.method = method_name(config, agent_config);
+    record.eval_kind = agent_config.phase == agent::Phase::kPretrain ? "zero_shot" : "few_shot";
+    record.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
+    record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
+    record.policy_version = version;
+    csv.write(record);
+    ++summary.episodes;
+    summary.successes += record.success ? 1 : 0;
+    completion_sum += record.route_completion;
+    steps_sum += record.steps;
+    INDRIVE_LOG(kInfo, "local") << "episode " << summary.episodes << ": density " << spec.density
+                                << ", " << (record.success ? "success" : record.failure_reason)
+                                << ", " << record.steps << " steps, completion "
+                                << record.route_completion;
+  }
+  if (summary.episodes > 0) {
+    summary.success_rate = static_cast<double>(summary.successes) / summary.episodes;
+    summary.mean_route_completion = completion_sum / summary.episodes;
+    summary.mean_steps = steps_sum / summary.episodes;
+  }
+  return summary;
+}
+
+}  // namespace indrive::local

@@ -1,0 +1,77 @@
+#include "indrive/agent/agent_config.h"
+
+#include <gtest/gtest.h>
+
+namespace indrive::agent {
+namespace {
+
+TEST(AgentConfig, PresetsSetTheSizesOfTheTable) {
+  const AgentConfig tiny = preset("tiny");
+  EXPECT_EQ(tiny.world_model.image, 32);
+  EXPECT_EQ(tiny.world_model.cnn_depth, 8);
+  EXPECT_EQ(tiny.world_model.deter, 128);
+  EXPECT_EQ(tiny.world_model.units, 128);
+  EXPECT_EQ(tiny.world_model.stoch_dim(), 256);
+  EXPECT_EQ(tiny.replay.batch, 8);
+  EXPECT_EQ(tiny.replay.length, 16);
+  const AgentConfig small = preset("small");
+  EXPECT_EQ(small.world_model.image, 128);
+  EXPECT_EQ(small.world_model.deter, 512);
+  EXPECT_EQ(small.world_model.feat_dim(), 512 + 1024);
+  EXPECT_EQ(preset("cpu").world_model.image, 64);
+  for (const char* name : {"tiny", "cpu", "small"}) EXPECT_NO_THROW(validate(preset(name)));
+}
+
+TEST(AgentConfig, DefaultsAreThePapersValues) {
+  const AgentConfig c = preset("cpu");
+  EXPECT_EQ(c.intrinsic.method, Method::kDisag);
+  EXPECT_EQ(c.intrinsic.ensemble, 8);
+  EXPECT_EQ(c.intrinsic.disag_reward, DisagReward::kVariance);
+  EXPECT_FLOAT_EQ(c.intrinsic.norm_eps, 1.0f);
+  EXPECT_EQ(c.behavior.horizon, 15);
+  EXPECT_FLOAT_EQ(c.behavior.gamma, 0.99f);
+  EXPECT_FLOAT_EQ(c.behavior.lambda, 0.95f);
+  EXPECT_FLOAT_EQ(c.behavior.entropy, 3e-4f);
+  EXPECT_FLOAT_EQ(c.behavior.slow_critic_rate, 0.02f);
+  EXPECT_FLOAT_EQ(c.world_model.kl_dyn, 0.5f);
+  EXPECT_FLOAT_EQ(c.world_model.kl_rep, 0.1f);
+  EXPECT_FLOAT_EQ(c.world_model.free_nats, 1.0f);
+  EXPECT_FLOAT_EQ(c.world_model.unimix, 0.01f);
+  EXPECT_EQ(c.replay.capacity, 100000);
+  EXPECT_EQ(c.replay.prefill, 1000);
+}
+
+TEST(AgentConfig, KeysRoundTripThroughText) {
+  AgentConfig c = preset("tiny");
+  set_config_value(c, "intrinsic.method", "rnd");
+  set_config_value(c, "behavior.horizon", "7");
+  set_config_value(c, "world_model.kl_dyn", "0.25");
+  set_config_value(c, "phase", "finetune");
+  set_config_value(c, "intrinsic.disag_reward", "std");
+  EXPECT_EQ(c.intrinsic.method, Method::kRnd);
+  EXPECT_EQ(c.behavior.horizon, 7);
+  EXPECT_FLOAT_EQ(c.world_model.kl_dyn, 0.25f);
+  EXPECT_EQ(c.phase, Phase::kFinetune);
+  AgentConfig copy = preset("cpu");
+  for (const auto& [key, value] : config_values(c)) set_config_value(copy, key, value);
+  EXPECT_EQ(config_values(copy), config_values(c));
+}
+
+TEST(AgentConfig, BadInputThrowsTypedErrors) {
+  EXPECT_THROW(preset("huge"), AgentConfigError);
+  AgentConfig c = preset("tiny");
+  EXPECT_THROW(set_config_value(c, "world_model.nope", "1"), AgentConfigError);
+  EXPECT_THROW(set_config_value(c, "behavior.horizon", "fifteen"), AgentConfigError);
+  EXPECT_THROW(set_config_value(c, "behavior.horizon", "15x"), AgentConfigError);
+  EXPECT_THROW(set_config_value(c, "intrinsic.method", "curiosity"), AgentConfigError);
+  set_config_value(c, "world_model.image", "48");
+  EXPECT_THROW(validate(c), AgentConfigError);
+  try {
+    preset("huge");
+  } catch (const AgentConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("tiny, cpu, small"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace indrive::agent

@@ -1,0 +1,70 @@
+#include "indrive/basics/episode_csv.h"
+
+#include <gtest/gtest.h>
+
+#include "testing.h"
+
+namespace indrive {
+namespace {
+
+EpisodeRecord sample(int episode, bool success) {
+  return {.run_id = "disag-s0",
+          .method = "disag",
+          .eval_kind = "zero_shot",
+          .task = "exploration",
+          .train_seed = 0,
+          .policy_version = 42,
+          .town = "my, town",
+          .route = "straight",
+          .density = 10,
+          .traffic_seed = 1,
+          .spawn_seed = 2,
+          .episode = episode,
+          .success = success,
+          .failure_reason = success ? "" : "collision",
+          .steps = 321,
+          .route_completion = 0.5,
+          .episode_return = -1.25};
+}
+
+TEST(EpisodeCsv, RoundTripsRecordsIncludingQuotedFields) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "eval.csv";
+  {
+    EpisodeCsvWriter writer(path);
+    writer.write(sample(0, true));
+  }
+  {
+    EpisodeCsvWriter writer(path);  // appending does not repeat the header
+    writer.write(sample(1, false));
+  }
+  const auto records = read_episode_csv(path);
+  ASSERT_EQ(records.size(), 2u);
+  EXPECT_EQ(records[0].town, "my, town");
+  EXPECT_TRUE(records[0].success);
+  EXPECT_EQ(records[1].failure_reason, "collision");
+  EXPECT_EQ(records[1].policy_version, 42);
+  EXPECT_DOUBLE_EQ(records[1].episode_return, -1.25);
+  EXPECT_DOUBLE_EQ(records[1].route_completion, 0.5);
+}
+
+TEST(EpisodeCsv, APartialRowOrWrongHeaderIsAClearError) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "eval.csv";
+  { EpisodeCsvWriter(path).write(sample(0, true)); }
+  { std::ofstream(path, std::ios::app) << "disag-s0,disag,zero_shot\n"; }
+  try {
+    read_episode_csv(path);
+    FAIL();
+  } catch (const CsvError& error) {
+    EXPECT_NE(std::string(error.what()).find("eval.csv:3: 3 fields, expected 17"),
+              std::string::npos)
+        << error.what();
+  }
+  const auto other = dir.path() / "other.csv";
+  { std::ofstream(other) << "a,b,c\n1,2,3\n"; }
+  EXPECT_THROW(read_episode_csv(other), CsvError);
+}
+
+}  // namespace
+}  // namespace indrive
