@@ -139,36 +139,29 @@ struct Evaluator::Impl {
       inbox = std::make_unique<SnapshotInbox>(service.run_id(),
                                               service::architecture_descriptor(agent_config),
                                               c.get<double>("actor.request_after_s"));
-      participant = std::make_unique<dds::Participant>(service.participant_options("evaluator"));
-      result_writer = participant->make_writer<msg::EpisodeResult>();
-      request_writer = participant->make_writer<msg::SnapshotRequest>();
-      policy_reader = participant->make_reader<msg::PolicySnapshot>(
+      endpoints = std::make_unique<dds::EndpointSet>(service.participant_options("evaluator"));
+      result_writer = &endpoints->writer<msg::EpisodeResult>();
+      request_writer = &endpoints->writer<msg::SnapshotRequest>();
+      endpoints->reader<msg::PolicySnapshot>(
           [this](const msg::PolicySnapshot& snapshot) { inbox->offer(snapshot); });
-      announce_reader = participant->make_reader<msg::SnapshotAnnounce>(
+      endpoints->reader<msg::SnapshotAnnounce>(
           [this](const msg::SnapshotAnnounce& announce) { inbox->announce(announce); });
-      heartbeat_reader =
-          participant->make_reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
-            if (heartbeat.role() != msg::ROLE_LEARNER ||
-                dds::validate(heartbeat, config.run_id()) != dds::DropReason::kOk) {
-              return;
-            }
-            last_learner_beat.store(Clock::now().time_since_epoch().count());
-            if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
-          });
+      endpoints->reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
+        if (heartbeat.role() != msg::ROLE_LEARNER ||
+            dds::validate(heartbeat, config.run_id()) != dds::DropReason::kOk) {
+          return;
+        }
+        last_learner_beat.store(Clock::now().time_since_epoch().count());
+        if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
+      });
     }
     env::EnvConfig env_config = protocol_env_config(actor::env_config(service, agent_config));
     env_config.town = grid.towns.front();
     env = std::make_unique<env::Env>(env_config);
   }
 
-  ~Impl() {
-    policy_reader.reset();
-    announce_reader.reset();
-    heartbeat_reader.reset();
-    result_writer.reset();
-    request_writer.reset();
-    participant.reset();
-  }
+  // The readers' callbacks use the inbox and the counters: the endpoints go first.
+  ~Impl() { endpoints.reset(); }
 
   void request_snapshot() {
     msg::SnapshotRequest request;
@@ -400,12 +393,10 @@ struct Evaluator::Impl {
   std::atomic<std::uint64_t> learner_done{0};
   // When the learner's last heartbeat arrived (steady clock ticks; 0: never).
   std::atomic<Clock::rep> last_learner_beat{0};
-  std::unique_ptr<dds::Participant> participant;
-  std::unique_ptr<dds::Writer<msg::EpisodeResult>> result_writer;
-  std::unique_ptr<dds::Writer<msg::SnapshotRequest>> request_writer;
-  std::unique_ptr<dds::Reader<msg::PolicySnapshot>> policy_reader;
-  std::unique_ptr<dds::Reader<msg::SnapshotAnnounce>> announce_reader;
-  std::unique_ptr<dds::Reader<msg::Heartbeat>> heartbeat_reader;
+  // The DDS endpoints when a learner's snapshot is evaluated; the writers belong to it.
+  std::unique_ptr<dds::EndpointSet> endpoints;
+  dds::Writer<msg::EpisodeResult>* result_writer = nullptr;
+  dds::Writer<msg::SnapshotRequest>* request_writer = nullptr;
   std::unique_ptr<env::Env> env;
 };
 

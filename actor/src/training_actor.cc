@@ -139,36 +139,25 @@ struct TrainingActor::Impl {
   // inbox, allowance gate) lives outside them, so a new participant carries on where the old one
   // stopped.
   void connect() {
-    participant = std::make_unique<dds::Participant>(config.participant_options("actor"));
-    chunk_writer = participant->make_writer<msg::TrajectoryChunk>();
-    result_writer = participant->make_writer<msg::EpisodeResult>();
-    heartbeat_writer = participant->make_writer<msg::Heartbeat>();
-    request_writer = participant->make_writer<msg::SnapshotRequest>();
-    policy_reader = participant->make_reader<msg::PolicySnapshot>(
+    endpoints = std::make_unique<dds::EndpointSet>(config.participant_options("actor"));
+    chunk_writer = &endpoints->writer<msg::TrajectoryChunk>();
+    result_writer = &endpoints->writer<msg::EpisodeResult>();
+    heartbeat_writer = &endpoints->writer<msg::Heartbeat>();
+    request_writer = &endpoints->writer<msg::SnapshotRequest>();
+    endpoints->reader<msg::PolicySnapshot>(
         [this](const msg::PolicySnapshot& snapshot) { inbox.offer(snapshot); });
-    announce_reader = participant->make_reader<msg::SnapshotAnnounce>(
+    endpoints->reader<msg::SnapshotAnnounce>(
         [this](const msg::SnapshotAnnounce& announce) { inbox.announce(announce); });
-    allowance_reader = participant->make_reader<msg::StepAllowance>(
+    endpoints->reader<msg::StepAllowance>(
         [this](const msg::StepAllowance& allowance) { gate.on_allowance(allowance); });
-    heartbeat_reader =
-        participant->make_reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
-          gate.on_learner_heartbeat(heartbeat, own_steps.load());
-        });
+    endpoints->reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
+      gate.on_learner_heartbeat(heartbeat, own_steps.load());
+    });
     connected_at = Clock::now();
   }
 
-  void disconnect() {
-    // Readers and writers before the participant.
-    policy_reader.reset();
-    announce_reader.reset();
-    allowance_reader.reset();
-    heartbeat_reader.reset();
-    chunk_writer.reset();
-    result_writer.reset();
-    heartbeat_writer.reset();
-    request_writer.reset();
-    participant.reset();
-  }
+  // The endpoints go with their participant, in the set's order.
+  void disconnect() { endpoints.reset(); }
 
   // A participant that has heard nothing of the learner for actor.rejoin_after_s is replaced by
   // a new one, which opens its transport ports again and is discovered afresh. Why: on one host a
@@ -181,7 +170,7 @@ struct TrainingActor::Impl {
   // made while the link is down found no learner when the link came back (the next one, 20 s
   // later, did; tests/learner/two_host_test.cc) and the chunks the old one still held were lost.
   void maybe_rejoin() {
-    if (rejoin_after_s <= 0.0 || !participant->uses_shared_memory()) return;
+    if (rejoin_after_s <= 0.0 || !endpoints->participant().uses_shared_memory()) return;
     if (gate.silent_s() < rejoin_after_s || seconds_since(connected_at) < rejoin_after_s) return;
     ++stats.rejoins;
     INDRIVE_LOG(kWarn, "actor") << "actor " << id << " heard nothing of the learner of run '"
@@ -416,15 +405,12 @@ struct TrainingActor::Impl {
   agent::Policy policy;
   agent::RandomPolicy random_policy;
   std::mt19937_64 rng;
-  std::unique_ptr<dds::Participant> participant;
-  std::unique_ptr<dds::Writer<msg::TrajectoryChunk>> chunk_writer;
-  std::unique_ptr<dds::Writer<msg::EpisodeResult>> result_writer;
-  std::unique_ptr<dds::Writer<msg::Heartbeat>> heartbeat_writer;
-  std::unique_ptr<dds::Writer<msg::SnapshotRequest>> request_writer;
-  std::unique_ptr<dds::Reader<msg::PolicySnapshot>> policy_reader;
-  std::unique_ptr<dds::Reader<msg::SnapshotAnnounce>> announce_reader;
-  std::unique_ptr<dds::Reader<msg::StepAllowance>> allowance_reader;
-  std::unique_ptr<dds::Reader<msg::Heartbeat>> heartbeat_reader;
+  // The DDS endpoints; the writers below belong to it (valid while it is connected).
+  std::unique_ptr<dds::EndpointSet> endpoints;
+  dds::Writer<msg::TrajectoryChunk>* chunk_writer = nullptr;
+  dds::Writer<msg::EpisodeResult>* result_writer = nullptr;
+  dds::Writer<msg::Heartbeat>* heartbeat_writer = nullptr;
+  dds::Writer<msg::SnapshotRequest>* request_writer = nullptr;
   std::unique_ptr<env::Env> env;
   std::unique_ptr<env::CoverageTracker> coverage;
   double coverage_period_s = 60.0;

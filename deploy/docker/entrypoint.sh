@@ -41,7 +41,13 @@ if [ "${1:-}" = "discovery-server" ]; then
   echo "entrypoint: discovery server on $own:$port"
   # Not exec'd: `fastdds` dies of SIGTERM (exit 143) when compose stops it; a stop asked for is
   # a clean end (0), while a server that fails on its own still gives its own exit code.
-  fastdds discovery -i 0 -l "$own" -p "$port" &
+  # `fastdds discovery` is a Python wrapper that starts fast-discovery-server and does not pass a
+  # stop on to it (the server outlived it, holding its port): run the server itself where it is.
+  if command -v fast-discovery-server >/dev/null 2>&1; then
+    fast-discovery-server -i 0 -l "$own" -p "$port" &
+  else
+    fastdds discovery -i 0 -l "$own" -p "$port" &
+  fi
   server_pid=$!
   trap 'kill -TERM "$server_pid" 2>/dev/null; wait "$server_pid" || true; exit 0' TERM INT
   status=0

@@ -10,9 +10,17 @@
 
 #include "indrive/basics/check.h"
 #include "indrive/basics/checksum.h"
+#include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
 
 namespace indrive::learner {
+namespace fs = std::filesystem;
 namespace {
+
+// A damaged checkpoint that a resume skipped is renamed to <name> + this, out of the rotation:
+// its counter sorts after the checkpoints the resumed learner writes next, so left in place it
+// would stay "newest" and the retention of learner.checkpoint_keep would delete intact ones.
+constexpr std::string_view kDamagedSuffix = ".damaged";
 
 // Version 1 holds counters and agent bytes; version 2 adds the sizes of its sections and the
 // zstd-compressed replay file; version 3 adds a trailer with a CRC-32 of every byte before it,
@@ -95,6 +103,36 @@ void decompress_replay(std::span<const std::uint8_t> frame, std::uint64_t declar
   if (out.size() != declared) {
     throw fail("decompresses to " + std::to_string(out.size()) +
                " bytes, its counters line declares " + std::to_string(declared));
+  }
+}
+
+// What one checkpoint file restores, into fresh objects.
+RestoredRun restore(const fs::path& file, const agent::AgentConfig& config,
+                    const agent::ReplayOptions& replay_options) {
+  std::vector<std::uint8_t> agent_bytes, replay_bytes;
+  RestoredRun restored;
+  restored.file = file;
+  restored.counters = unpack_checkpoint(read_file(file), agent_bytes, &replay_bytes);
+  restored.agent = std::make_unique<agent::Agent>(config);
+  restored.agent->load_checkpoint(agent_bytes, file.string() + " (agent section)");
+  restored.replay.emplace(replay_options);
+  if (!replay_bytes.empty()) restored.replay->load(replay_bytes, file.string() + " (replay)");
+  return restored;
+}
+
+// Moves a damaged checkpoint out of the rotation, keeping its bytes for a look.
+void set_aside(const fs::path& file) {
+  const fs::path target = file.string() + std::string(kDamagedSuffix);
+  std::error_code error;
+  fs::rename(file, target, error);
+  if (error) {
+    INDRIVE_LOG(kWarn, "learner") << "could not rename damaged checkpoint " << file.string()
+                                  << " to " << target.filename().string() << ": " << error.message()
+                                  << "; move it away by hand";
+  } else {
+    INDRIVE_LOG(kWarn, "learner") << "damaged checkpoint " << file.string() << " set aside as "
+                                  << target.filename().string()
+                                  << "; delete it once it is no longer needed";
   }
 }
 
@@ -214,6 +252,41 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
     }
   }
   return counters;
+}
+
+RestoredRun restore_newest(const std::vector<fs::path>& files, const agent::AgentConfig& config,
+                           const agent::ReplayOptions& replay_options, const std::string& run_id) {
+  std::vector<std::pair<fs::path, std::string>> damaged;
+  for (auto file = files.rbegin(); file != files.rend(); ++file) {
+    RestoredRun restored;
+    try {
+      restored = restore(*file, config, replay_options);
+    } catch (const std::exception& error) {
+      // Whatever the loaders throw: CheckpointError, agent::AgentError, agent::ReplayError,
+      // IoError when the file cannot be read, std::bad_alloc for sizes no memory holds.
+      damaged.emplace_back(*file, error.what());
+      INDRIVE_LOG(kWarn, "learner") << "checkpoint " << file->string()
+                                    << " cannot be restored and is skipped: " << error.what();
+      continue;
+    }
+    restored.skipped = damaged.size();
+    for (const auto& [path, reason] : damaged) set_aside(path);
+    INDRIVE_LOG(kInfo, "learner") << "resumed from " << file->string() << " with "
+                                  << restored.replay->size() << " replay steps (skipped "
+                                  << damaged.size() << " damaged newer checkpoint"
+                                  << (damaged.size() == 1 ? "" : "s") << ")";
+    return restored;
+  }
+  std::string message = "no checkpoint of run '" + run_id + "' can be restored (" +
+                        std::to_string(damaged.size()) + " tried):";
+  for (const auto& [path, reason] : damaged) message += "\n  " + path.string() + ": " + reason;
+  message +=
+      "\nThe learner does not start the run again from nothing on its own: restore an "
+      "intact copy, or move these files out of " +
+      (files.empty() ? std::string("the checkpoints folder")
+                     : files.front().parent_path().string()) +
+      " to start the run afresh.";
+  throw CheckpointError(message);
 }
 
 }  // namespace indrive::learner

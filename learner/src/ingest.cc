@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "indrive/basics/log.h"
+
 namespace indrive::learner {
 
 dds::DropReason decode_chunk(const msg::TrajectoryChunk& chunk, const IngestOptions& options,
@@ -60,6 +62,48 @@ bool DuplicateFilter::first_time(const msg::TrajectoryChunk& chunk) {
     order_.pop_front();
   }
   return true;
+}
+
+dds::DropReason ChunkQueue::offer(const msg::TrajectoryChunk& chunk) {
+  DecodedChunk decoded;
+  dds::DropReason reason = decode_chunk(chunk, options_, decoded);
+  if (reason == dds::DropReason::kOk && !stored_.first_time(chunk)) {
+    reason = dds::DropReason::kDuplicate;
+  }
+  drops_.record(reason);
+  if (reason != dds::DropReason::kOk) {
+    INDRIVE_LOG(kWarn, "learner") << "dropped chunk " << chunk.chunk_seq() << " of actor "
+                                  << chunk.actor_id() << " (run '" << chunk.run_id()
+                                  << "'): " << dds::drop_reason_name(reason);
+    return reason;
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  queue_.push_back(std::move(decoded));
+  return reason;
+}
+
+ChunkQueue::Drained ChunkQueue::drain_into(agent::ReplayBuffer& replay,
+                                           std::uint64_t policy_version) {
+  std::deque<DecodedChunk> taken;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    taken.swap(queue_);
+  }
+  Drained drained;
+  for (DecodedChunk& chunk : taken) {
+    auto expected = next_seq_.find(chunk.actor_id);
+    if (chunk.chunk_seq != 0 &&
+        (expected == next_seq_.end() || expected->second != chunk.chunk_seq)) {
+      ++drained.sequence_gaps;
+      chunk.steps.front().is_first = true;
+    }
+    next_seq_[chunk.actor_id] = chunk.chunk_seq + 1;
+    for (const auto& step : chunk.steps) replay.add(static_cast<int>(chunk.actor_id), step);
+    drained.steps += static_cast<std::int64_t>(chunk.steps.size());
+    ++drained.chunks;
+    drained.lag_sum += static_cast<double>(policy_version - chunk.policy_version);
+  }
+  return drained;
 }
 
 }  // namespace indrive::learner

@@ -22,21 +22,17 @@
 #include "indrive/learner/evaluation_tally.h"
 #include "indrive/learner/ingest.h"
 #include "indrive/learner/rate_limiter.h"
+#include "indrive/learner/snapshot_publisher.h"
 #include "indrive/nn/kernels.h"
+#include "indrive/service/training_metrics.h"
 
 namespace indrive::learner {
 namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-// Versions are reserved in blocks written to this file before any of them is published, so a
-// learner killed between checkpoints never hands out a version twice after its restart.
+// Policy versions reserved before they are published (VersionReservation).
 constexpr std::string_view kVersionReserveFile = "policy_versions_reserved";
-constexpr std::uint64_t kVersionReserveBlock = 100;
-// A damaged checkpoint that a resume skipped is renamed to <name> + this, out of the rotation:
-// its counter sorts after the checkpoints the resumed learner writes next, so left in place it
-// would stay "newest" and the retention of learner.checkpoint_keep would delete intact ones.
-constexpr std::string_view kDamagedSuffix = ".damaged";
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
@@ -57,6 +53,7 @@ struct Learner::Impl {
                                        : service.run_dir().parent_path(),
                                    service.run_id())),
         checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
+        versions(run.checkpoints() / kVersionReserveFile),
         replay(replay_options(agent_config)),
         rate({.replay_ratio = service.config().get<double>("learner.replay_ratio"),
               .steps_per_update =
@@ -66,7 +63,7 @@ struct Learner::Impl {
               .slack = std::max(service.config().get<std::int64_t>("learner.allowance_slack"),
                                 service.config().get<std::int64_t>("actor.chunk_length")),
               .async = service.config().get<bool>("learner.async")}),
-        ingest({.run_id = service.run_id(),
+        chunks({.run_id = service.run_id(),
                 .height = agent_config.world_model.image,
                 .width = agent_config.world_model.image,
                 .phase = service.wire_phase(),
@@ -86,20 +83,14 @@ struct Learner::Impl {
     // Actors may always run until replay holds the prefill again; a restored replay needs none.
     fill_floor = stats.counters.env_steps + std::max<std::int64_t>(0, fill_target - replay.size());
 
-    participant = std::make_unique<dds::Participant>(service.participant_options("learner"));
-    policy_writer = participant->make_writer<msg::PolicySnapshot>();
-    announce_writer = participant->make_writer<msg::SnapshotAnnounce>();
-    allowance_writer = participant->make_writer<msg::StepAllowance>();
-    heartbeat_writer = participant->make_writer<msg::Heartbeat>();
-    chunk_reader = participant->make_reader<msg::TrajectoryChunk>(
-        [this](const msg::TrajectoryChunk& chunk) { on_chunk(chunk); });
-    result_reader = participant->make_reader<msg::EpisodeResult>(
+    endpoints = std::make_unique<dds::EndpointSet>(service.participant_options("learner"));
+    publisher.emplace(*endpoints, config.run_id());
+    allowance_writer = &endpoints->writer<msg::StepAllowance>();
+    heartbeat_writer = &endpoints->writer<msg::Heartbeat>();
+    endpoints->reader<msg::TrajectoryChunk>(
+        [this](const msg::TrajectoryChunk& chunk) { chunks.offer(chunk); });
+    endpoints->reader<msg::EpisodeResult>(
         [this](const msg::EpisodeResult& result) { on_result(result); });
-    request_reader =
-        participant->make_reader<msg::SnapshotRequest>([this](const msg::SnapshotRequest& request) {
-          if (dds::validate(request, config.run_id()) != dds::DropReason::kOk) return;
-          republish_requested.store(true);
-        });
     // A resumed learner hands out its restored policy at once, under a new version.
     if (stats.counters.updates > 0) publish_snapshot();
     publish_pacing(/*force=*/true);
@@ -112,15 +103,11 @@ struct Learner::Impl {
     INDRIVE_LOG(kInfo, "learner") << nn::kernel_report();
   }
 
+  // The readers' callbacks use the queues and counters: the endpoints go first, then the
+  // publisher that wrote on them.
   ~Impl() {
-    chunk_reader.reset();
-    result_reader.reset();
-    request_reader.reset();
-    policy_writer.reset();
-    announce_writer.reset();
-    allowance_writer.reset();
-    heartbeat_writer.reset();
-    participant.reset();
+    endpoints.reset();
+    publisher.reset();
   }
 
   static agent::ReplayOptions replay_options(const agent::AgentConfig& agent_config) {
@@ -129,26 +116,6 @@ struct Learner::Impl {
             .width = agent_config.world_model.image,
             .has_rewards = agent_config.phase != agent::Phase::kPretrain,
             .seed = agent_config.replay.seed + agent_config.seed};
-  }
-
-  // What one checkpoint file restores, loaded into fresh objects: a file that fails half way
-  // (the agent loads its parameters before it checks its normalisers, for one) leaves nothing
-  // of itself in the learner's own agent and replay.
-  struct Restored {
-    LearnerCounters counters;
-    std::unique_ptr<agent::Agent> agent;
-    std::optional<agent::ReplayBuffer> replay;
-  };
-
-  Restored restore(const fs::path& file) const {
-    std::vector<std::uint8_t> agent_bytes, replay_bytes;
-    Restored restored;
-    restored.counters = unpack_checkpoint(read_file(file), agent_bytes, &replay_bytes);
-    restored.agent = std::make_unique<agent::Agent>(agent_config);
-    restored.agent->load_checkpoint(agent_bytes, file.string() + " (agent section)");
-    restored.replay.emplace(replay_options(agent_config));
-    if (!replay_bytes.empty()) restored.replay->load(replay_bytes, file.string() + " (replay)");
-    return restored;
   }
 
   // Restores the newest intact checkpoint of this run, or a finetune's initial checkpoint.
@@ -173,102 +140,20 @@ struct Learner::Impl {
     }
     ++stats.counters.learner_epoch;
     // Snapshots published after the newest checkpoint used versions up to the reserved mark.
-    reserved_version = read_reserved_version();
-    stats.counters.policy_version = std::max(stats.counters.policy_version, reserved_version);
+    stats.counters.policy_version = std::max(stats.counters.policy_version, versions.reserved());
   }
 
-  // Tries the checkpoints (oldest first in `files`) newest first and keeps the first that
-  // restores completely. A damaged file is skipped with a warning, not fatal: a checkpoint cut
-  // short by a crash of the machine or a bit flip on disk should cost the run only the updates
-  // since the older one. With none intact the learner refuses to start rather than start the
-  // run again from nothing, which would silently throw away the run's training so far.
+  // Continues from the newest intact checkpoint (restore_newest).
   void resume_from(const std::vector<fs::path>& files) {
-    std::vector<std::pair<fs::path, std::string>> damaged;
-    for (auto file = files.rbegin(); file != files.rend(); ++file) {
-      Restored restored;
-      try {
-        restored = restore(*file);
-      } catch (const std::exception& error) {
-        // Whatever the loaders throw: CheckpointError, agent::AgentError, agent::ReplayError,
-        // IoError when the file cannot be read, std::bad_alloc for sizes no memory holds.
-        damaged.emplace_back(*file, error.what());
-        INDRIVE_LOG(kWarn, "learner") << "checkpoint " << file->string()
-                                      << " cannot be restored and is skipped: " << error.what();
-        continue;
-      }
-      stats.counters = restored.counters;
-      agent = std::move(restored.agent);
-      replay = std::move(*restored.replay);
-      stats.restored_replay_steps = replay.size();
-      stats.resumed_from = *file;
-      stats.skipped_checkpoints = damaged.size();
-      latest_checkpoint = *file;
-      for (const auto& [path, reason] : damaged) set_aside(path);
-      INDRIVE_LOG(kInfo, "learner")
-          << "resumed from " << file->string() << " with " << replay.size()
-          << " replay steps (skipped " << damaged.size() << " damaged newer checkpoint"
-          << (damaged.size() == 1 ? "" : "s") << ")";
-      return;
-    }
-    std::string message = "no checkpoint of run '" + config.run_id() + "' can be restored (" +
-                          std::to_string(damaged.size()) + " tried):";
-    for (const auto& [path, reason] : damaged) message += "\n  " + path.string() + ": " + reason;
-    message +=
-        "\nThe learner does not start the run again from nothing on its own: restore an "
-        "intact copy, or move these files out of " +
-        run.checkpoints().string() + " to start the run afresh.";
-    throw CheckpointError(message);
-  }
-
-  // Moves a damaged checkpoint out of the rotation, keeping its bytes for a look.
-  void set_aside(const fs::path& file) {
-    const fs::path target = file.string() + std::string(kDamagedSuffix);
-    std::error_code error;
-    fs::rename(file, target, error);
-    if (error) {
-      INDRIVE_LOG(kWarn, "learner")
-          << "could not rename damaged checkpoint " << file.string() << " to "
-          << target.filename().string() << ": " << error.message() << "; move it away by hand";
-    } else {
-      INDRIVE_LOG(kWarn, "learner")
-          << "damaged checkpoint " << file.string() << " set aside as "
-          << target.filename().string() << "; delete it once it is no longer needed";
-    }
-  }
-
-  std::uint64_t read_reserved_version() const {
-    const fs::path path = run.checkpoints() / kVersionReserveFile;
-    if (!fs::exists(path)) return 0;
-    const auto bytes = read_file(path);
-    try {
-      return std::stoull(std::string(bytes.begin(), bytes.end()));
-    } catch (const std::exception&) {
-      throw CheckpointError("file " + path.string() +
-                            " does not hold a policy version; delete it only if no actor of this "
-                            "run still holds a snapshot");
-    }
-  }
-
-  // Makes sure `version` is reserved on disk before it is published.
-  void reserve_version(std::uint64_t version) {
-    if (version <= reserved_version) return;
-    reserved_version = version + kVersionReserveBlock - 1;
-    atomic_write(run.checkpoints() / kVersionReserveFile, std::to_string(reserved_version));
-  }
-
-  // After the final checkpoint no version above the current one was published: a clean
-  // restart continues right after it instead of after the reserved block.
-  // Failing to write it (disk full) is harmless: the larger reservation on disk stays valid.
-  void release_reserved_versions() {
-    if (reserved_version <= stats.counters.policy_version) return;
-    try {
-      atomic_write(run.checkpoints() / kVersionReserveFile,
-                   std::to_string(stats.counters.policy_version));
-      reserved_version = stats.counters.policy_version;
-    } catch (const IoError& error) {
-      INDRIVE_LOG(kWarn, "learner") << "reserved policy versions not released: " << error.what()
-                                    << "; a restart skips to v" << reserved_version + 1;
-    }
+    RestoredRun restored =
+        restore_newest(files, agent_config, replay_options(agent_config), config.run_id());
+    stats.counters = restored.counters;
+    agent = std::move(restored.agent);
+    replay = std::move(*restored.replay);
+    stats.restored_replay_steps = replay.size();
+    stats.resumed_from = restored.file;
+    stats.skipped_checkpoints = restored.skipped;
+    latest_checkpoint = restored.file;
   }
 
   // Writes a checkpoint; returns whether it was written. A write that fails (disk full, I/O
@@ -312,24 +197,6 @@ struct Learner::Impl {
     return true;
   }
 
-  // DDS thread: decode and queue; the acting thread owns the replay buffer.
-  void on_chunk(const msg::TrajectoryChunk& chunk) {
-    DecodedChunk decoded;
-    dds::DropReason reason = decode_chunk(chunk, ingest, decoded);
-    if (reason == dds::DropReason::kOk && !stored_chunks.first_time(chunk)) {
-      reason = dds::DropReason::kDuplicate;
-    }
-    drops.record(reason);
-    if (reason != dds::DropReason::kOk) {
-      INDRIVE_LOG(kWarn, "learner")
-          << "dropped chunk " << chunk.chunk_seq() << " of actor " << chunk.actor_id() << " (run '"
-          << chunk.run_id() << "'): " << dds::drop_reason_name(reason);
-      return;
-    }
-    std::lock_guard<std::mutex> lock(queue_mutex);
-    queue.push_back(std::move(decoded));
-  }
-
   void on_result(const msg::EpisodeResult& result) {
     if (dds::validate(result, config.run_id()) != dds::DropReason::kOk) return;
     if (result.sender_role() == msg::ROLE_EVALUATOR) {
@@ -337,7 +204,7 @@ struct Learner::Impl {
       return;
     }
     if (result.sender_role() != msg::ROLE_ACTOR) return;
-    std::lock_guard<std::mutex> lock(queue_mutex);
+    std::lock_guard<std::mutex> lock(results_mutex);
     ++interval_episodes;
     interval_successes += result.success() ? 1 : 0;
     episode_stats.add(result.steps(), result.reach_segments());
@@ -345,29 +212,13 @@ struct Learner::Impl {
 
   // Moves queued chunks into replay; returns whether there were any.
   bool drain() {
-    std::deque<DecodedChunk> taken;
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex);
-      taken.swap(queue);
-    }
-    for (DecodedChunk& chunk : taken) {
-      // A missing predecessor (lost chunk) must not glue two pieces of trajectory together.
-      // After a learner restart the first chunk of an actor follows steps that were never
-      // stored (they arrived after the checkpoint), so it starts a new piece as well.
-      auto expected = next_seq.find(chunk.actor_id);
-      if (chunk.chunk_seq != 0 &&
-          (expected == next_seq.end() || expected->second != chunk.chunk_seq)) {
-        ++stats.sequence_gaps;
-        chunk.steps.front().is_first = true;
-      }
-      next_seq[chunk.actor_id] = chunk.chunk_seq + 1;
-      for (const auto& step : chunk.steps) replay.add(static_cast<int>(chunk.actor_id), step);
-      stats.counters.env_steps += static_cast<std::int64_t>(chunk.steps.size());
-      ++stats.chunks;
-      interval_lag_sum += static_cast<double>(stats.counters.policy_version - chunk.policy_version);
-      ++interval_chunks;
-    }
-    return !taken.empty();
+    const ChunkQueue::Drained drained = chunks.drain_into(replay, stats.counters.policy_version);
+    stats.counters.env_steps += drained.steps;
+    stats.chunks += drained.chunks;
+    stats.sequence_gaps += drained.sequence_gaps;
+    interval_lag_sum += drained.lag_sum;
+    interval_chunks += drained.chunks;
+    return drained.chunks > 0;
   }
 
   bool ready_to_train() const {
@@ -396,8 +247,7 @@ struct Learner::Impl {
 
   void publish_snapshot() {
     msg::PolicySnapshot snapshot;
-    snapshot.run_id(config.run_id());
-    reserve_version(stats.counters.policy_version + 1);
+    versions.reserve(stats.counters.policy_version + 1);
     snapshot.version(++stats.counters.policy_version);
     snapshot.preset(agent_config.preset);
     snapshot.architecture(service::architecture_descriptor(agent_config));
@@ -408,36 +258,8 @@ struct Learner::Impl {
     snapshot.env_steps(static_cast<std::uint64_t>(stats.counters.env_steps));
     snapshot.updates(static_cast<std::uint64_t>(stats.counters.updates));
     snapshot.params(agent->snapshot());
-    dds::seal(snapshot);
-    policy_writer->write(snapshot);
-    newest_snapshot = std::move(snapshot);
+    publisher->publish(std::move(snapshot), done);
     ++stats.snapshots_published;
-    publish_announce();
-  }
-
-  void publish_announce() {
-    if (!newest_snapshot) return;
-    msg::SnapshotAnnounce announce;
-    announce.run_id(config.run_id());
-    announce.version(newest_snapshot->version());
-    announce.checksum(newest_snapshot->checksum());
-    announce.size_bytes(newest_snapshot->params().size());
-    announce.learner_done(done);
-    dds::seal(announce);
-    announce_writer->write(announce);
-    last_announce = Clock::now();
-  }
-
-  // Tells evaluators reliably which snapshot is the run's last: the heartbeat's "done" is best
-  // effort and can be lost as the process exits, which left an evaluator waiting for it. The
-  // announce is reliable and the learner waits (bounded) until every matched reader has it.
-  void announce_final_snapshot() {
-    if (!newest_snapshot) return;
-    publish_announce();
-    if (!announce_writer->wait_for_acknowledgments(std::chrono::seconds(5))) {
-      INDRIVE_LOG(kWarn, "learner") << "not every reader acknowledged the final announce of v"
-                                    << newest_snapshot->version() << " within 5 s";
-    }
   }
 
   std::uint64_t allowance() const {
@@ -473,7 +295,7 @@ struct Learner::Impl {
     beat.policy_version(stats.counters.policy_version);
     beat.env_steps(static_cast<std::uint64_t>(stats.counters.env_steps));
     beat.updates(static_cast<std::uint64_t>(stats.counters.updates));
-    beat.dropped_messages(drops.dropped());
+    beat.dropped_messages(chunks.drops().dropped());
     beat.wall_time_s(unix_time_s());
     dds::seal(beat);
     heartbeat_writer->write(beat);
@@ -482,56 +304,50 @@ struct Learner::Impl {
     last_pacing = Clock::now();
   }
 
-  void log_metrics() {
-    const double elapsed = seconds_since(last_log);
-    if (elapsed < log_interval_s &&
-        !passed_multiple(logged_steps, stats.counters.env_steps, log_every_steps)) {
-      return;
-    }
-    const std::int64_t steps = stats.counters.env_steps - logged_steps;
-    const std::int64_t updates = stats.counters.updates - logged_updates;
-    const double ratio = stats.counters.env_steps > 0
-                             ? static_cast<double>(stats.counters.updates) *
-                                   rate.options().steps_per_update /
-                                   static_cast<double>(stats.counters.env_steps)
-                             : 0.0;
+  service::TrainingProgress progress_now() const {
+    return {.env_steps = stats.counters.env_steps,
+            .updates = stats.counters.updates,
+            .policy_version = stats.counters.policy_version,
+            .learner_epoch = stats.counters.learner_epoch,
+            .replay_size = replay.size(),
+            .steps_per_update = rate.options().steps_per_update,
+            .phase = agent_config.phase};
+  }
+
+  // A metrics line and a console line when one is due (or `force`).
+  void log_metrics(bool force = false) {
+    const service::TrainingProgress now = progress_now();
+    if (!force && !interval.due(now, log_interval_s, log_every_steps)) return;
     std::uint64_t episodes = 0, successes = 0;
     auto episode_record = nlohmann::json::object();  // length and reach of the actors' episodes
     {
-      std::lock_guard<std::mutex> lock(queue_mutex);
+      std::lock_guard<std::mutex> lock(results_mutex);
       std::swap(episodes, interval_episodes);
       std::swap(successes, interval_successes);
       episode_stats.write(episode_record);
     }
     stats.episodes += episodes;
     const double lag = interval_chunks > 0 ? interval_lag_sum / interval_chunks : 0.0;
-    nlohmann::json record = {{"env_steps", stats.counters.env_steps},
-                             {"updates", stats.counters.updates},
-                             {"learner_epoch", stats.counters.learner_epoch},
-                             {"env_steps_per_s", steps / std::max(elapsed, 1e-9)},
-                             {"updates_per_s", updates / std::max(elapsed, 1e-9)},
-                             {"replay_ratio", ratio},
-                             {"policy_version", stats.counters.policy_version},
-                             {"policy_lag", lag},
-                             {"replay_size", replay.size()},
-                             {"replay_added", replay.total_added()},
-                             {"snapshots_published", stats.snapshots_published},
-                             {"snapshot_requests", stats.snapshot_requests},
-                             {"chunks", stats.chunks},
-                             {"replay_actors", next_seq.size()},
-                             {"dropped_chunks", drops.dropped()},
-                             {"dropped_wrong_run", drops.count(dds::DropReason::kWrongRun)},
-                             {"dropped_bad_checksum", drops.count(dds::DropReason::kBadChecksum)},
-                             {"dropped_bad_shape", drops.count(dds::DropReason::kBadShape)},
-                             {"dropped_wrong_schema", drops.count(dds::DropReason::kWrongSchema)},
-                             {"dropped_duplicate", drops.count(dds::DropReason::kDuplicate)},
-                             {"dropped_undecodable", dds::undecodable_samples()},
-                             {"sequence_gaps", stats.sequence_gaps},
-                             {"failed_updates", stats.failed_updates},
-                             {"checkpoints", stats.checkpoints},
-                             {"checkpoint_failures", stats.checkpoint_failures},
-                             {"episodes", episodes},
-                             {"phase", std::string(agent::to_string(agent_config.phase))}};
+    const dds::DropCounters& drops = chunks.drops();
+    nlohmann::json record = interval.fields(now);
+    record.update({{"policy_lag", lag},
+                   {"replay_added", replay.total_added()},
+                   {"snapshots_published", stats.snapshots_published},
+                   {"snapshot_requests", stats.snapshot_requests},
+                   {"chunks", stats.chunks},
+                   {"replay_actors", chunks.actors()},
+                   {"dropped_chunks", drops.dropped()},
+                   {"dropped_wrong_run", drops.count(dds::DropReason::kWrongRun)},
+                   {"dropped_bad_checksum", drops.count(dds::DropReason::kBadChecksum)},
+                   {"dropped_bad_shape", drops.count(dds::DropReason::kBadShape)},
+                   {"dropped_wrong_schema", drops.count(dds::DropReason::kWrongSchema)},
+                   {"dropped_duplicate", drops.count(dds::DropReason::kDuplicate)},
+                   {"dropped_undecodable", dds::undecodable_samples()},
+                   {"sequence_gaps", stats.sequence_gaps},
+                   {"failed_updates", stats.failed_updates},
+                   {"checkpoints", stats.checkpoints},
+                   {"checkpoint_failures", stats.checkpoint_failures},
+                   {"episodes", episodes}});
     if (episodes > 0) record["episode_success_rate"] = static_cast<double>(successes) / episodes;
     record.update(episode_record);
     evaluations.write_new(record);
@@ -540,9 +356,8 @@ struct Learner::Impl {
 
     std::ostringstream line;
     line.precision(3);
-    line << "steps " << stats.counters.env_steps << " | updates " << stats.counters.updates << " | "
-         << steps / elapsed << " steps/s | " << updates / elapsed << " upd/s | ratio " << ratio
-         << " | policy v" << stats.counters.policy_version << " lag " << lag << " | dropped "
+    line << interval.console_head(now) << " | ratio " << record["replay_ratio"].get<double>()
+         << " | policy v" << now.policy_version << " lag " << lag << " | dropped "
          << drops.dropped();
     int shown = 0;
     for (const auto& [name, value] : last_metrics) {
@@ -550,17 +365,14 @@ struct Learner::Impl {
       line << " | " << name << " " << value;
     }
     if (progress) progress(line.str());
-    last_log = Clock::now();
-    logged_steps = stats.counters.env_steps;
-    logged_updates = stats.counters.updates;
+    interval.restart(now);
     interval_lag_sum = 0.0;
     interval_chunks = 0;
   }
 
   int run_loop(const std::atomic<bool>& stop) {
-    last_checkpoint = last_log = Clock::now();
-    logged_steps = stats.counters.env_steps;
-    logged_updates = stats.counters.updates;
+    last_checkpoint = Clock::now();
+    interval.restart(progress_now());
     while (!stop.load()) {
       bool worked = false;
       if (ready_to_train()) {
@@ -572,12 +384,8 @@ struct Learner::Impl {
       // and take them again, running ahead of the replay ratio on a slow or loaded machine.
       worked = drain() || worked;
       publish_pacing(false);
-      if (republish_requested.exchange(false) && newest_snapshot) {
-        ++stats.snapshot_requests;
-        policy_writer->write(*newest_snapshot);
-        publish_announce();
-      }
-      if (seconds_since(last_announce) >= announce_s) publish_announce();
+      if (publisher->take_request() && publisher->republish(done)) ++stats.snapshot_requests;
+      if (publisher->seconds_since_announce() >= announce_s) publisher->announce(done);
       log_metrics();
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
       // The budget ends the run once the updates it is owed are done.
@@ -595,7 +403,7 @@ struct Learner::Impl {
     // a snapshot written just before the learner exits can be lost to readers still fetching
     // it, and the newest periodic snapshot is the run's final policy otherwise. The learner
     // lingers briefly so readers can fetch it.
-    if (done && stats.counters.updates > 0 && !newest_snapshot) {
+    if (done && stats.counters.updates > 0 && !publisher->newest()) {
       publish_snapshot();
       INDRIVE_LOG(kInfo, "learner") << "final snapshot v" << stats.counters.policy_version << " at "
                                     << stats.counters.updates << " updates";
@@ -616,16 +424,15 @@ struct Learner::Impl {
           << " and what was trained and received after it is lost; free disk space before the "
              "run continues";
     }
-    release_reserved_versions();
-    last_log = Clock::now() - std::chrono::hours(1);
-    log_metrics();
+    versions.release(stats.counters.policy_version);
+    log_metrics(/*force=*/true);
     publish_pacing(true);
-    if (done) announce_final_snapshot();
+    if (done) publisher->announce_final(done);
     INDRIVE_LOG(kInfo, "learner") << (done ? "budget reached" : "stopped") << ": "
                                   << stats.counters.env_steps << " env steps, "
                                   << stats.counters.updates << " updates, policy v"
                                   << stats.counters.policy_version << ", chunks " << stats.chunks
-                                  << ", " << drops.summary() << ", checkpoints "
+                                  << ", " << chunks.drops().summary() << ", checkpoints "
                                   << stats.checkpoints << " (" << stats.checkpoint_failures
                                   << " failed)";
     return code;
@@ -635,10 +442,11 @@ struct Learner::Impl {
   agent::AgentConfig agent_config;
   RunDir run;
   CheckpointFiles checkpoints;
+  VersionReservation versions;  // policy versions reserved on disk before they are published
   std::unique_ptr<agent::Agent> agent;  // set by resume()
   agent::ReplayBuffer replay;
   RateLimiter rate;
-  IngestOptions ingest;
+  ChunkQueue chunks;  // chunks on their way into the replay
   MetricsLog metrics;
   EvaluationTally evaluations;  // evaluators' results, on the metrics lines
   std::int64_t budget = 0;
@@ -649,35 +457,26 @@ struct Learner::Impl {
   double checkpoint_s = 300.0;
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;
-  std::uint64_t reserved_version = 0;
   fs::path latest_checkpoint;  // the newest intact checkpoint this learner wrote or resumed from
   bool done = false;
 
-  std::unique_ptr<dds::Participant> participant;
-  std::unique_ptr<dds::Writer<msg::PolicySnapshot>> policy_writer;
-  std::unique_ptr<dds::Writer<msg::SnapshotAnnounce>> announce_writer;
-  std::unique_ptr<dds::Writer<msg::StepAllowance>> allowance_writer;
-  std::unique_ptr<dds::Writer<msg::Heartbeat>> heartbeat_writer;
-  std::unique_ptr<dds::Reader<msg::TrajectoryChunk>> chunk_reader;
-  std::unique_ptr<dds::Reader<msg::EpisodeResult>> result_reader;
-  std::unique_ptr<dds::Reader<msg::SnapshotRequest>> request_reader;
+  // DDS: the endpoint set owns every reader and writer; the publisher and the pacing writers
+  // below write on it.
+  std::unique_ptr<dds::EndpointSet> endpoints;
+  std::optional<SnapshotPublisher> publisher;
+  dds::Writer<msg::StepAllowance>* allowance_writer = nullptr;
+  dds::Writer<msg::Heartbeat>* heartbeat_writer = nullptr;
 
-  dds::DropCounters drops;
-  DuplicateFilter stored_chunks;  // chunks stored so far: a repeat is dropped
-  std::mutex queue_mutex;
-  std::deque<DecodedChunk> queue;
-  std::uint64_t interval_episodes = 0, interval_successes = 0;
-  EpisodeStats episode_stats;  // under queue_mutex
-  std::map<std::uint32_t, std::uint64_t> next_seq;
-  std::atomic<bool> republish_requested{false};
-  std::optional<msg::PolicySnapshot> newest_snapshot;
+  std::mutex results_mutex;
+  std::uint64_t interval_episodes = 0, interval_successes = 0;  // under results_mutex
+  EpisodeStats episode_stats;                                   // under results_mutex
   agent::TrainMetrics last_metrics;
   LearnerStats stats;
   std::function<void(const std::string&)> progress;
   std::uint64_t published_allowance = 0;
   std::int64_t published_received = -1;
-  Clock::time_point last_pacing{}, last_announce{}, last_log{}, last_checkpoint{};
-  std::int64_t logged_steps = 0, logged_updates = 0;
+  Clock::time_point last_pacing{}, last_checkpoint{};
+  service::MetricsInterval interval;  // since the last metrics line
   double interval_lag_sum = 0.0;
   std::uint64_t interval_chunks = 0;
 };
@@ -689,7 +488,7 @@ void Learner::on_progress(std::function<void(const std::string&)> callback) {
 }
 int Learner::run(const std::atomic<bool>& stop) {
   const int code = impl_->run_loop(stop);
-  impl_->stats.dropped_chunks = impl_->drops.dropped();
+  impl_->stats.dropped_chunks = impl_->chunks.drops().dropped();
   return code;
 }
 const LearnerStats& Learner::stats() const { return impl_->stats; }

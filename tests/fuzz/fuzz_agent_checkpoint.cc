@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstring>
 
+#include "fuzz_agent.h"
 #include "fuzz_support.h"
 #include "indrive/agent/agent.h"
 #include "indrive/basics/checksum.h"

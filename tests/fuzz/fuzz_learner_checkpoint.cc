@@ -2,6 +2,7 @@
 // as Learner does: unpacked, its agent loaded, its replay restored.
 #include <cstdint>
 
+#include "fuzz_agent.h"
 #include "fuzz_support.h"
 #include "indrive/agent/agent.h"
 #include "indrive/agent/replay.h"

@@ -7,6 +7,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "fuzz_agent.h"
 #include "fuzz_cdr.h"
 #include "fuzz_support.h"
 #include "indrive/actor/snapshot_inbox.h"

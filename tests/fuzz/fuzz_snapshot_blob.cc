@@ -2,6 +2,7 @@
 // actor and evaluator does with the bytes of a PolicySnapshot or a snapshot file.
 #include <cstdint>
 
+#include "fuzz_agent.h"
 #include "fuzz_support.h"
 #include "indrive/agent/agent.h"
 #include "indrive/agent/policy.h"

@@ -2,6 +2,7 @@
 // the agent sized by the header, the blob loaded into a policy of that size.
 #include <cstdint>
 
+#include "fuzz_agent.h"
 #include "fuzz_support.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"

@@ -136,5 +136,55 @@ TEST(DuplicateFilterTest, ARepeatedChunkIsCaughtAndARestartedActorsChunksAreNot)
   EXPECT_TRUE(filter.first_time(chunk)) << "forgotten after three newer ones";
 }
 
+// Chunks 0..count-1 of one actor, each of `steps` steps.
+std::vector<msg::TrajectoryChunk> actor_chunks(int count, int steps) {
+  actor::ChunkBuilder builder({.run_id = "run-a",
+                               .actor_id = 4,
+                               .height = kSide,
+                               .width = kSide,
+                               .chunk_length = steps,
+                               .phase = msg::PHASE_PRETRAIN,
+                               .with_rewards = false});
+  std::vector<msg::TrajectoryChunk> chunks;
+  for (int c = 0; c < count; ++c) {
+    for (int t = 0; t < steps; ++t) {
+      builder.add({.frame = std::vector<std::uint8_t>(kSide * kSide, 3),
+                   .action = t % 9,
+                   .is_first = c == 0 && t == 0,
+                   .episode_id = 1,
+                   .episode_step = static_cast<std::uint64_t>(c * steps + t),
+                   .policy_version = 5});
+    }
+    chunks.push_back(builder.take());
+  }
+  return chunks;
+}
+
+TEST(ChunkQueueTest, StoresChunksDropsRepeatsAndStartsANewPieceAfterAGap) {
+  ChunkQueue queue(pretrain_options());
+  agent::ReplayBuffer replay({.capacity = 1000, .height = kSide, .width = kSide});
+  const auto chunks = actor_chunks(3, 4);
+  EXPECT_EQ(queue.offer(chunks[0]), dds::DropReason::kOk);
+  EXPECT_EQ(queue.offer(chunks[0]), dds::DropReason::kDuplicate);
+  EXPECT_EQ(queue.offer(chunks[2]), dds::DropReason::kOk);  // chunk 1 never comes
+  msg::TrajectoryChunk foreign = chunks[1];
+  foreign.run_id("run-b");
+  EXPECT_EQ(queue.offer(foreign), dds::DropReason::kWrongRun);
+
+  const ChunkQueue::Drained drained = queue.drain_into(replay, /*policy_version=*/7);
+  EXPECT_EQ(drained.chunks, 2u);
+  EXPECT_EQ(drained.steps, 8);
+  EXPECT_EQ(drained.sequence_gaps, 1u) << "chunk 2 follows no stored chunk 1";
+  EXPECT_DOUBLE_EQ(drained.lag_sum, 2 * (7.0 - 5.0));
+  EXPECT_EQ(replay.size(), 8);
+  EXPECT_EQ(queue.actors(), 1u);
+  EXPECT_EQ(queue.drops().count(dds::DropReason::kDuplicate), 1u);
+  EXPECT_EQ(queue.drops().count(dds::DropReason::kWrongRun), 1u);
+  EXPECT_EQ(queue.drops().dropped(), 2u);
+
+  const ChunkQueue::Drained nothing = queue.drain_into(replay, 7);
+  EXPECT_EQ(nothing.chunks, 0u);
+}
+
 }  // namespace
 }  // namespace indrive::learner

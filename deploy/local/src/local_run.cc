@@ -21,6 +21,7 @@
 #include "indrive/envserver/town.h"
 #include "indrive/learner/learner.h"
 #include "indrive/nn/kernels.h"
+#include "indrive/service/training_metrics.h"
 
 namespace indrive::local {
 namespace fs = std::filesystem;
@@ -216,31 +217,27 @@ struct LocalRun::Impl {
     }
   }
 
+  service::TrainingProgress progress_now() {
+    return {.env_steps = env_steps(),
+            .updates = updates(),
+            .policy_version = static_cast<std::uint64_t>(updates()),
+            .learner_epoch = base.learner_epoch,
+            .replay_size = trainer.replay().size(),
+            .steps_per_update =
+                static_cast<std::int64_t>(agent_config.replay.batch) * agent_config.replay.length,
+            .phase = agent_config.phase};
+  }
+
   void log_metrics() {
-    const double elapsed = std::max(seconds_since(last_log), 1e-9);
-    const std::int64_t steps = env_steps() - logged_steps;
-    const std::int64_t done_updates = updates() - logged_updates;
-    const double per_update =
-        static_cast<double>(agent_config.replay.batch) * agent_config.replay.length;
+    const service::TrainingProgress now = progress_now();
     const auto& counters = trainer.counters();
-    nlohmann::json record = {
-        {"env_steps", env_steps()},
-        {"updates", updates()},
-        {"env_steps_per_s", steps / elapsed},
-        {"updates_per_s", done_updates / elapsed},
-        {"replay_ratio", counters.env_steps > 0 ? counters.updates * per_update /
-                                                      static_cast<double>(counters.env_steps)
-                                                : 0.0},
-        {"policy_version", updates()},
-        {"replay_size", trainer.replay().size()},
-        {"episodes", counters.episodes - logged_episodes},
-        {"learner_epoch", base.learner_epoch},
-        {"phase", std::string(agent::to_string(agent_config.phase))},
-        {"random_policy", random},
-        {"non_finite_metrics", non_finite},
-        {"coverage_distinct_per_1k", coverage.distinct_per_window()},
-        {"coverage_fraction_visited", coverage.fraction_visited()},
-        {"coverage_segments_visited", coverage.segments_visited()}};
+    nlohmann::json record = interval.fields(now);
+    record.update({{"episodes", counters.episodes - logged_episodes},
+                   {"random_policy", random},
+                   {"non_finite_metrics", non_finite},
+                   {"coverage_distinct_per_1k", coverage.distinct_per_window()},
+                   {"coverage_fraction_visited", coverage.fraction_visited()},
+                   {"coverage_segments_visited", coverage.segments_visited()}});
     if (counters.episodes > logged_episodes) record["episode_return"] = counters.episode_return;
     episodes.write(record);  // length and reach, see close_episode()
     // Training metrics as means over the interval's updates (the learner logs its last update;
@@ -252,8 +249,7 @@ struct LocalRun::Impl {
 
     std::ostringstream line;
     line.precision(4);
-    line << "steps " << env_steps() << " | updates " << updates() << " | " << steps / elapsed
-         << " steps/s | " << done_updates / elapsed << " upd/s";
+    line << interval.console_head(now);
     for (const char* key : {"wm/recon", "wm/kl", "intrinsic/loss", "expl/reward", "expl/entropy",
                             "wm/reward", "task/reward", "task/actor_loss", "task/entropy"}) {
       if (record.contains(key)) line << " | " << key << " " << record[key].get<double>();
@@ -262,9 +258,7 @@ struct LocalRun::Impl {
          << 100.0 * coverage.fraction_visited() << "% of town";
     if (progress) progress(line.str());
     interval_sums.clear();
-    last_log = Clock::now();
-    logged_steps = env_steps();
-    logged_updates = updates();
+    interval.restart(now);
     logged_episodes = counters.episodes;
   }
 
@@ -279,9 +273,8 @@ struct LocalRun::Impl {
   }
 
   void train(const std::atomic<bool>& stop) {
-    last_log = last_checkpoint = Clock::now();
-    logged_steps = env_steps();
-    logged_updates = updates();
+    last_checkpoint = Clock::now();
+    interval.restart(progress_now());
     const auto on_metrics = [this](const agent::TrainMetrics& step) {
       on_update(step);
       on_update(trainer.agent().last_timing().as_metrics());
@@ -290,15 +283,12 @@ struct LocalRun::Impl {
       // Small slices keep the stop signal, logging and checkpoints responsive.
       const std::int64_t slice = budget > 0 ? std::min<std::int64_t>(16, budget - env_steps()) : 16;
       trainer.run(slice, on_metrics);
-      if (seconds_since(last_log) >= log_interval_s ||
-          passed_multiple(logged_steps, env_steps(), log_every_steps)) {
-        log_metrics();
-      }
+      if (interval.due(progress_now(), log_interval_s, log_every_steps)) log_metrics();
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
     }
     // A session that took no step (budget already reached) leaves the files of the last one.
     if (trainer.counters().env_steps == 0) return;
-    if (env_steps() != logged_steps) log_metrics();
+    if (env_steps() != interval.start_env_steps()) log_metrics();
     save_checkpoint();
     // The acting policy as a snapshot file, evaluable without this run directory
     // (indrive-actor --evaluate --snapshot FILE).
@@ -331,8 +321,9 @@ struct LocalRun::Impl {
   std::map<std::string, std::pair<double, std::int64_t>> interval_sums;
   std::int64_t non_finite = 0;
   std::function<void(const std::string&)> progress;
-  Clock::time_point last_log{}, last_checkpoint{};
-  std::int64_t logged_steps = 0, logged_updates = 0, logged_episodes = 0;
+  Clock::time_point last_checkpoint{};
+  service::MetricsInterval interval;  // since the last metrics line
+  std::int64_t logged_episodes = 0;
 };
 
 LocalRun::LocalRun(const service::ServiceConfig& config) : impl_(std::make_unique<Impl>(config)) {}

@@ -3,9 +3,16 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
 #include <span>
 #include <stdexcept>
+#include <string>
 #include <vector>
+
+#include "indrive/agent/agent.h"
+#include "indrive/agent/replay.h"
 
 namespace indrive::learner {
 
@@ -40,5 +47,26 @@ std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
 LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes = nullptr);
+
+// A run restored from one checkpoint file.
+struct RestoredRun {
+  std::filesystem::path file;  // the checkpoint it came from
+  LearnerCounters counters;
+  std::unique_ptr<agent::Agent> agent;
+  std::optional<agent::ReplayBuffer> replay;
+  std::uint64_t skipped = 0;  // damaged newer checkpoints that were set aside
+};
+
+// Tries `files` (oldest first, as CheckpointFiles::list gives them) newest first and returns the
+// first that restores completely, loaded into fresh objects: a file that fails half way (the
+// agent loads its parameters before it checks its normalisers, for one) leaves nothing of
+// itself behind. A damaged file is skipped with a warning, not fatal: a checkpoint cut short by a
+// crash of the machine or a bit flip on disk should cost the run only the updates since the older
+// one; the skipped newer files are renamed to <name>.damaged, out of the rotation. With none
+// intact it throws CheckpointError listing each file and its fault, rather than let the run
+// start again from nothing, which would silently throw away its training so far.
+RestoredRun restore_newest(const std::vector<std::filesystem::path>& files,
+                           const agent::AgentConfig& config,
+                           const agent::ReplayOptions& replay_options, const std::string& run_id);
 
 }  // namespace indrive::learner

@@ -4,14 +4,14 @@
 // (schema, run id, shape, checksum; dds/messages.h) and the learner's own: frame size of this
 // model, phase, rewards present exactly in task phases, action and class ids in range.
 //
-//   DecodedChunk decoded;
-//   auto reason = decode_chunk(chunk, options, decoded);
-//   if (reason != dds::DropReason::kOk) drops.record(reason); else for (auto& s : decoded.steps)
-//   ...
+//   ChunkQueue queue(options);
+//   queue.offer(chunk);                                      // DDS thread: checked, decoded
+//   ChunkQueue::Drained d = queue.drain_into(replay, version);  // training thread: stored
 #pragma once
 
 #include <cstdint>
 #include <deque>
+#include <map>
 #include <mutex>
 #include <set>
 #include <string>
@@ -65,6 +65,42 @@ class DuplicateFilter {
   std::mutex mutex_;
   std::set<Key> seen_;
   std::deque<Key> order_;
+};
+
+// Chunks on their way into the replay: checked, decoded and counted on the DDS thread (offer),
+// queued, and stored by the training thread (drain_into), which owns the replay. A chunk whose
+// predecessor from the same actor never came starts a new piece of trajectory, so a lost chunk
+// does not glue two pieces together; after a learner restart each actor's first chunk follows
+// steps that were never stored, and starts a new piece as well.
+class ChunkQueue {
+ public:
+  explicit ChunkQueue(IngestOptions options) : options_(std::move(options)) {}
+
+  // DDS thread: decodes `chunk` and queues it; returns why it was dropped (kOk: queued). Drops
+  // are counted and logged.
+  dds::DropReason offer(const msg::TrajectoryChunk& chunk);
+
+  // What one drain stored.
+  struct Drained {
+    std::uint64_t chunks = 0;
+    std::int64_t steps = 0;
+    std::uint64_t sequence_gaps = 0;  // chunks stored as the start of a new piece
+    double lag_sum = 0.0;             // sum over chunks of policy_version - chunk's version
+  };
+  // Training thread: stores every queued chunk in `replay`.
+  Drained drain_into(agent::ReplayBuffer& replay, std::uint64_t policy_version);
+
+  const dds::DropCounters& drops() const { return drops_; }
+  // Actors with a chunk stored since this process started (training thread).
+  std::size_t actors() const { return next_seq_.size(); }
+
+ private:
+  IngestOptions options_;
+  dds::DropCounters drops_;
+  DuplicateFilter stored_;  // a chunk stored already is dropped as a duplicate
+  std::mutex mutex_;
+  std::deque<DecodedChunk> queue_;                   // under mutex_
+  std::map<std::uint32_t, std::uint64_t> next_seq_;  // training thread
 };
 
 }  // namespace indrive::learner

@@ -34,6 +34,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "indrive/basics/log.h"
 #include "indrive/dds/messages.h"
@@ -300,6 +301,60 @@ class Participant {
   std::map<std::string, eprosima::fastdds::dds::Topic*> topics_;
   // Writers and readers alive on this participant; it must outlive them.
   std::shared_ptr<std::atomic<int>> live_endpoints_ = std::make_shared<std::atomic<int>>(0);
+};
+
+// A participant with the readers and writers a process made on it, torn down in the one safe
+// order: every reader first, newest first, so that no callback runs into an owner being
+// destroyed; then every writer; then the participant, which must outlive its endpoints. A
+// process keeps one set, replaces it as a whole (a rejoin) and never lists its endpoints twice.
+//
+//   dds::EndpointSet dds(config.participant_options("actor"));
+//   dds::Writer<msg::TrajectoryChunk>& chunks = dds.writer<msg::TrajectoryChunk>();
+//   dds.reader<msg::PolicySnapshot>([this](const msg::PolicySnapshot& s) { inbox.offer(s); });
+//   dds.close();  // or let it go out of scope
+class EndpointSet {
+ public:
+  // Creates the participant; throws DdsError on failure.
+  explicit EndpointSet(const ParticipantOptions& options)
+      : participant_(std::make_unique<Participant>(options)) {}
+  ~EndpointSet() { close(); }
+  EndpointSet(const EndpointSet&) = delete;
+  EndpointSet& operator=(const EndpointSet&) = delete;
+
+  // A writer on `topic`, owned by the set and valid until close().
+  template <typename T>
+  Writer<T>& writer(const std::string& topic = TopicTraits<T>::kTopic,
+                    const std::string& profile = TopicTraits<T>::kWriterProfile) {
+    std::shared_ptr<Writer<T>> made = participant().make_writer<T>(topic, profile);
+    writers_.push_back(made);
+    return *made;
+  }
+  // A reader on `topic` calling `on_sample` for each sample, owned by the set.
+  template <typename T>
+  Reader<T>& reader(typename Reader<T>::Callback on_sample,
+                    const std::string& topic = TopicTraits<T>::kTopic,
+                    const std::string& profile = TopicTraits<T>::kReaderProfile) {
+    std::shared_ptr<Reader<T>> made =
+        participant().make_reader<T>(std::move(on_sample), topic, profile);
+    readers_.push_back(made);
+    return *made;
+  }
+
+  Participant& participant() { return *participant_; }
+  const Participant& participant() const { return *participant_; }
+
+  // Readers (newest first), then writers, then the participant; a second call does nothing.
+  void close() {
+    while (!readers_.empty()) readers_.pop_back();
+    while (!writers_.empty()) writers_.pop_back();
+    participant_.reset();
+  }
+
+ private:
+  std::unique_ptr<Participant> participant_;
+  // Type-erased owners: each deletes its Writer<T> or Reader<T> with the right type.
+  std::vector<std::shared_ptr<void>> writers_;
+  std::vector<std::shared_ptr<void>> readers_;
 };
 
 namespace detail {

@@ -1,0 +1,80 @@
+// The learner's side of policy snapshots, the counterpart of the actor's SnapshotInbox: policy
+// versions reserved on disk before one is handed out, the PolicySnapshot written and kept as the
+// newest, written again when a late joiner asks for it (SnapshotRequest), and the
+// SnapshotAnnounce that tells actors and evaluators the newest version and whether the run is
+// done.
+//
+//   VersionReservation versions(run.checkpoints() / "policy_versions_reserved");
+//   SnapshotPublisher publisher(endpoints, run_id);
+//   versions.reserve(version);                      // before the version leaves the process
+//   publisher.publish(std::move(snapshot), done);   // sealed, written, announced
+//   if (publisher.take_request()) publisher.republish(done);
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "indrive/dds/messages.h"
+#include "indrive/dds/participant.h"
+
+namespace indrive::learner {
+
+// Policy versions reserved in blocks, written to a file before any of them is published, so a
+// learner killed between checkpoints never hands out a version twice after its restart.
+class VersionReservation {
+ public:
+  // Reads the reserved mark (0 without a file); throws CheckpointError when the file holds no
+  // version.
+  explicit VersionReservation(std::filesystem::path file);
+  // The highest version reserved on disk.
+  std::uint64_t reserved() const { return reserved_; }
+  // Makes sure `version` is reserved on disk, a block at a time; throws IoError when the file
+  // cannot be written.
+  void reserve(std::uint64_t version);
+  // After the final checkpoint, lowers the mark to the newest version `published`, so a clean
+  // restart continues right after it; a failure to write is logged and harmless (the larger
+  // reservation stays valid).
+  void release(std::uint64_t published);
+
+ private:
+  std::filesystem::path file_;
+  std::uint64_t reserved_ = 0;
+};
+
+class SnapshotPublisher {
+ public:
+  // Creates the snapshot and announce writers and the request reader on `endpoints`, which must
+  // outlive the publisher's use (the set tears them down).
+  SnapshotPublisher(dds::EndpointSet& endpoints, std::string run_id);
+
+  // Seals and writes `snapshot` (its version and contents filled in), keeps it as the newest and
+  // announces it.
+  void publish(msg::PolicySnapshot snapshot, bool done);
+  // Announces the newest snapshot (nothing before the first).
+  void announce(bool done);
+  // Writes the newest snapshot again and announces it; false when there is none yet.
+  bool republish(bool done);
+  // The last announce, written reliably: waits (up to 5 s) until every matched reader has it,
+  // since the heartbeat's "done" is best effort and can be lost as the process exits.
+  void announce_final(bool done);
+  // Whether a SnapshotRequest of this run came since the last call.
+  bool take_request() { return requested_.exchange(false); }
+
+  const std::optional<msg::PolicySnapshot>& newest() const { return newest_; }
+  // Seconds since the last announce (very many before the first).
+  double seconds_since_announce() const;
+
+ private:
+  std::string run_id_;
+  dds::Writer<msg::PolicySnapshot>& snapshot_writer_;
+  dds::Writer<msg::SnapshotAnnounce>& announce_writer_;
+  std::atomic<bool> requested_{false};
+  std::optional<msg::PolicySnapshot> newest_;
+  std::chrono::steady_clock::time_point last_announce_{};  // the epoch: due at once
+};
+
+}  // namespace indrive::learner

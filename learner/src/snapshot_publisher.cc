@@ -1,0 +1,98 @@
+#include "indrive/learner/snapshot_publisher.h"
+
+#include <string>
+#include <utility>
+
+#include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/learner/checkpoint.h"
+
+namespace indrive::learner {
+namespace {
+
+// Versions reserved at a time: one file write per this many snapshots.
+constexpr std::uint64_t kVersionReserveBlock = 100;
+
+}  // namespace
+
+VersionReservation::VersionReservation(std::filesystem::path file) : file_(std::move(file)) {
+  if (!std::filesystem::exists(file_)) return;
+  const auto bytes = read_file(file_);
+  try {
+    reserved_ = std::stoull(std::string(bytes.begin(), bytes.end()));
+  } catch (const std::exception&) {
+    throw CheckpointError("file " + file_.string() +
+                          " does not hold a policy version; delete it only if no actor of this "
+                          "run still holds a snapshot");
+  }
+}
+
+void VersionReservation::reserve(std::uint64_t version) {
+  if (version <= reserved_) return;
+  reserved_ = version + kVersionReserveBlock - 1;
+  atomic_write(file_, std::to_string(reserved_));
+}
+
+void VersionReservation::release(std::uint64_t published) {
+  if (reserved_ <= published) return;
+  try {
+    atomic_write(file_, std::to_string(published));
+    reserved_ = published;
+  } catch (const IoError& error) {
+    INDRIVE_LOG(kWarn, "learner") << "reserved policy versions not released: " << error.what()
+                                  << "; a restart skips to v" << reserved_ + 1;
+  }
+}
+
+SnapshotPublisher::SnapshotPublisher(dds::EndpointSet& endpoints, std::string run_id)
+    : run_id_(std::move(run_id)),
+      snapshot_writer_(endpoints.writer<msg::PolicySnapshot>()),
+      announce_writer_(endpoints.writer<msg::SnapshotAnnounce>()) {
+  endpoints.reader<msg::SnapshotRequest>([this](const msg::SnapshotRequest& request) {
+    if (dds::validate(request, run_id_) != dds::DropReason::kOk) return;
+    requested_.store(true);
+  });
+}
+
+void SnapshotPublisher::publish(msg::PolicySnapshot snapshot, bool done) {
+  snapshot.run_id(run_id_);
+  dds::seal(snapshot);
+  snapshot_writer_.write(snapshot);
+  newest_ = std::move(snapshot);
+  announce(done);
+}
+
+void SnapshotPublisher::announce(bool done) {
+  if (!newest_) return;
+  msg::SnapshotAnnounce message;
+  message.run_id(run_id_);
+  message.version(newest_->version());
+  message.checksum(newest_->checksum());
+  message.size_bytes(newest_->params().size());
+  message.learner_done(done);
+  dds::seal(message);
+  announce_writer_.write(message);
+  last_announce_ = std::chrono::steady_clock::now();
+}
+
+bool SnapshotPublisher::republish(bool done) {
+  if (!newest_) return false;
+  snapshot_writer_.write(*newest_);
+  announce(done);
+  return true;
+}
+
+void SnapshotPublisher::announce_final(bool done) {
+  if (!newest_) return;
+  announce(done);
+  if (!announce_writer_.wait_for_acknowledgments(std::chrono::seconds(5))) {
+    INDRIVE_LOG(kWarn, "learner") << "not every reader acknowledged the final announce of v"
+                                  << newest_->version() << " within 5 s";
+  }
+}
+
+double SnapshotPublisher::seconds_since_announce() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - last_announce_).count();
+}
+
+}  // namespace indrive::learner

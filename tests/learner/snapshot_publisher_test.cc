@@ -1,0 +1,111 @@
+// Tests of snapshot_publisher.h: versions reserved on disk before they leave the process, and
+// the snapshot written, kept, written again on request and announced.
+#include "indrive/learner/snapshot_publisher.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <fstream>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "indrive/basics/run_dir.h"
+#include "indrive/learner/checkpoint.h"
+#include "testing.h"
+
+namespace indrive::learner {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+std::string text_of(const fs::path& path) {
+  const auto bytes = read_file(path);
+  return {bytes.begin(), bytes.end()};
+}
+
+TEST(VersionReservationTest, ReservesABlockAheadAndReleasesDownToThePublishedVersion) {
+  testing::TempDir dir;
+  const fs::path file = dir.path() / "policy_versions_reserved";
+  VersionReservation versions(file);
+  EXPECT_EQ(versions.reserved(), 0u) << "no file: nothing reserved";
+  versions.reserve(1);
+  EXPECT_EQ(versions.reserved(), 100u);
+  EXPECT_EQ(text_of(file), "100");
+  versions.reserve(57);  // inside the block: no write needed
+  EXPECT_EQ(versions.reserved(), 100u);
+  versions.reserve(101);
+  EXPECT_EQ(versions.reserved(), 200u);
+  EXPECT_EQ(VersionReservation(file).reserved(), 200u) << "a restart reads the mark back";
+  versions.release(103);
+  EXPECT_EQ(versions.reserved(), 103u);
+  EXPECT_EQ(VersionReservation(file).reserved(), 103u);
+
+  std::ofstream(file) << "not a number";
+  EXPECT_THROW(VersionReservation{file}, CheckpointError);
+}
+
+TEST(SnapshotPublisherTest, PublishesKeepsRepublishesAndAnnounces) {
+  const dds::ParticipantOptions options{
+      .domain_id = testing::unique_domain_id(),
+      .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()};
+  dds::EndpointSet learner(options);
+  SnapshotPublisher publisher(learner, "run-p");
+  EXPECT_FALSE(publisher.newest());
+  EXPECT_FALSE(publisher.republish(false)) << "nothing to write before the first snapshot";
+
+  dds::EndpointSet actor(options);
+  std::mutex mutex;
+  std::vector<std::uint64_t> snapshots, announced;
+  std::vector<bool> done_flags;
+  auto& snapshot_reader = actor.reader<msg::PolicySnapshot>([&](const msg::PolicySnapshot& s) {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (dds::validate(s, "run-p") == dds::DropReason::kOk) snapshots.push_back(s.version());
+  });
+  auto& announce_reader = actor.reader<msg::SnapshotAnnounce>([&](const msg::SnapshotAnnounce& a) {
+    std::lock_guard<std::mutex> lock(mutex);
+    announced.push_back(a.version());
+    done_flags.push_back(a.learner_done());
+  });
+  auto& requests = actor.writer<msg::SnapshotRequest>();
+  ASSERT_TRUE(requests.wait_for_matched(1, 10s));
+  ASSERT_TRUE(snapshot_reader.wait_for_matched(1, 10s));
+  ASSERT_TRUE(announce_reader.wait_for_matched(1, 10s));
+
+  msg::PolicySnapshot snapshot;
+  snapshot.version(3);
+  snapshot.architecture("image=8");
+  snapshot.heads(msg::HEAD_ENCODER);
+  snapshot.params(std::vector<std::uint8_t>(64, 7));
+  publisher.publish(snapshot, /*done=*/false);
+  ASSERT_TRUE(publisher.newest());
+  EXPECT_EQ(publisher.newest()->run_id(), "run-p") << "the publisher names its run";
+
+  msg::SnapshotRequest request;
+  request.run_id("run-p");
+  dds::seal(request);
+  requests.write(request);
+  for (int i = 0; i < 500 && !publisher.take_request(); ++i) std::this_thread::sleep_for(10ms);
+  EXPECT_TRUE(publisher.republish(/*done=*/true));
+  publisher.announce_final(/*done=*/true);
+
+  // Announces are "keep last": a reader may see only the newest of quick ones, which must be
+  // the final one.
+  for (int i = 0; i < 500; ++i) {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      if (snapshots.size() >= 2 && !done_flags.empty() && done_flags.back()) break;
+    }
+    std::this_thread::sleep_for(10ms);
+  }
+  std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_EQ(snapshots, (std::vector<std::uint64_t>{3, 3})) << "published, then again on request";
+  ASSERT_FALSE(announced.empty());
+  for (const std::uint64_t version : announced) EXPECT_EQ(version, 3u);
+  EXPECT_TRUE(done_flags.back()) << "the final announce says the run is done";
+}
+
+}  // namespace
+}  // namespace indrive::learner
