@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "fuzz_support.h"
+#include "indrive/actor/env_adapter.h"
 #include "indrive/basics/config.h"
 #include "indrive/service/run_config.h"
 
