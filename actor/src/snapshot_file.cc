@@ -47,6 +47,7 @@ std::vector<std::string> snapshot_groups(std::span<const std::uint8_t> blob) {
     throw EvalError(std::string("snapshot: ") + error.what());
   }
   std::vector<std::string> names;
+  names.reserve(contents.size());
   for (const nn::BlobGroup& group : contents) names.push_back(group.name);
   return names;
 }

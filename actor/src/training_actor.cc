@@ -202,7 +202,7 @@ struct TrainingActor::Impl {
   }
 
   // Writes a chunk, retrying while the learner's history is full (back-pressure).
-  void publish(msg::TrajectoryChunk chunk, const std::atomic<bool>& stop) {
+  void publish(const msg::TrajectoryChunk& chunk, const std::atomic<bool>& stop) {
     const auto start = Clock::now();
     while (!chunk_writer->write(chunk)) {
       if (stop.load()) return;

@@ -319,7 +319,7 @@ Participant::~Participant() {
 }
 
 eprosima::fastdds::dds::Topic* Participant::find_or_create_topic(
-    const std::string& topic, eprosima::fastdds::dds::TypeSupport type) {
+    const std::string& topic, const eprosima::fastdds::dds::TypeSupport& type) {
   std::lock_guard<std::mutex> lock(topics_mutex_);
   if (auto it = topics_.find(topic); it != topics_.end()) {
     if (it->second->get_type_name() != type.get_type_name()) {

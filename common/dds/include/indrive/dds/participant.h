@@ -283,8 +283,8 @@ class Participant {
     eprosima::fastdds::dds::TypeSupport type(new typename TopicTraits<T>::PubSubType());
     return find_or_create_topic(topic, type);
   }
-  eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& topic,
-                                                      eprosima::fastdds::dds::TypeSupport type);
+  eprosima::fastdds::dds::Topic* find_or_create_topic(
+      const std::string& topic, const eprosima::fastdds::dds::TypeSupport& type);
   eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic,
                                                     const std::string& profile);
   eprosima::fastdds::dds::DataReader* create_reader(
