@@ -4,8 +4,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "indrive/envserver/net_geometry.h"
 #include "indrive/envserver/town.h"
-#include "net_geometry.h"
 
 namespace indrive::env {
 

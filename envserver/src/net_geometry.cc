@@ -1,4 +1,4 @@
-#include "net_geometry.h"
+#include "indrive/envserver/net_geometry.h"
 
 #include <algorithm>
 #include <cmath>

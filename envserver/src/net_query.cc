@@ -6,7 +6,7 @@
 
 #include "indrive/basics/check.h"
 #include "indrive/envserver/net.h"
-#include "net_geometry.h"
+#include "indrive/envserver/net_geometry.h"
 
 namespace indrive::env {
 

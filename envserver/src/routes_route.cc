@@ -4,8 +4,8 @@
 #include <limits>
 
 #include "indrive/basics/check.h"
+#include "indrive/envserver/net_geometry.h"
 #include "indrive/envserver/routes.h"
-#include "net_geometry.h"
 
 namespace indrive::env {
 

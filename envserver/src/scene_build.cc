@@ -8,7 +8,7 @@
 #include <set>
 
 #include "indrive/basics/check.h"
-#include "net_geometry.h"
+#include "indrive/envserver/net_geometry.h"
 
 namespace indrive::env {
 

@@ -5,8 +5,6 @@ indrive_test(envserver_net_test
           routes_conflicts_test.cc scene_build_test.cc net_draw_test.cc routes_feasibility_test.cc
   LIBS indrive::envserver
   LABEL unit TIMEOUT 120)
-# The geometry helpers are private to the library; the tests use them to measure curvature.
-target_include_directories(envserver_net_test PRIVATE ${PROJECT_SOURCE_DIR}/envserver/src)
 target_compile_definitions(envserver_net_test PRIVATE
   INDRIVE_NETCONVERT_FOR_TESTS="${NETCONVERT_BINARY}")
 indrive_bench(envserver_net_bench SOURCES net_query_bench.cc LIBS indrive::envserver ARGS town01)

@@ -10,7 +10,7 @@
 #include <set>
 #include <thread>
 
-#include "net_geometry.h"
+#include "indrive/envserver/net_geometry.h"
 #include "net_test_town.h"
 #include "testing.h"
 

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <set>
 
-#include "net_geometry.h"
+#include "indrive/envserver/net_geometry.h"
 #include "net_test_network.h"
 #include "net_test_town.h"
 

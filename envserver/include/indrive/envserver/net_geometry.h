@@ -1,4 +1,5 @@
-// Small planar geometry helpers shared by the net, routes and scene code (private).
+// Small planar geometry of the road network (polylines, arc lengths, closest points), used by
+// the net, routes and scene code and tested on its own (tests/envserver/net_town_test.cc).
 #pragma once
 
 #include <Eigen/Core>
