@@ -28,10 +28,12 @@ packages=(
   libssl-dev openssl
   libgtest-dev libgmock-dev
   ffmpeg
+  libjs-chart.js
 )
 # The test command also builds and briefly runs the fuzz targets (tests/fuzz/README.md):
 # clang's libFuzzer and sanitizer runtimes, and its OpenMP.
-test_packages=(clang libclang-rt-14-dev libomp-14-dev)
+# The dashboard's browser test opens a real page in headless Chromium.
+test_packages=(clang libclang-rt-14-dev libomp-14-dev chromium)
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 

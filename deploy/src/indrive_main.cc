@@ -1,15 +1,19 @@
 // `indrive`: the project's front door.
 //
 //   indrive launch --config deploy/configs/smoke.yaml --run-id smoke --actors 2 --evaluators 1
+#include <signal.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <string>
+#include <thread>
 
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
+#include "indrive/deploy/dashboard.h"
 #include "indrive/deploy/launch.h"
 #include "indrive/deploy/plot.h"
 #include "indrive/deploy/report.h"
@@ -23,6 +27,42 @@ fs::path own_folder() {
   std::error_code error;
   const fs::path self = fs::read_symlink("/proc/self/exe", error);
   return error ? fs::current_path() : self.parent_path();
+}
+
+volatile sig_atomic_t g_stop = 0;
+void on_stop_signal(int) { g_stop = 1; }
+
+// `indrive dashboard`: writes the page once, or with --watch every N seconds until SIGINT or
+// SIGTERM (for runs that no `indrive launch` supervises: docker-compose, several hosts).
+int run_dashboard(indrive::deploy::DashboardInput input, const fs::path& page, double watch_s) {
+  using indrive::deploy::write_dashboard;
+  const auto print = [](const indrive::deploy::DashboardStats& stats) {
+    std::printf("%s: %zu charts, %zu points, %zu maps, %zu videos, %.0f KB, written in %.2f s\n",
+                stats.page.c_str(), stats.charts, stats.points, stats.pictures, stats.videos,
+                stats.bytes / 1024.0, stats.seconds);
+    std::fflush(stdout);
+  };
+  if (watch_s <= 0) {
+    print(write_dashboard(input, page));
+    return 0;
+  }
+  struct sigaction action {};
+  action.sa_handler = on_stop_signal;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  input.live_refresh_s = watch_s;
+  while (g_stop == 0) {
+    print(write_dashboard(input, page));
+    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(watch_s);
+    while (g_stop == 0 && std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
+  input.live_refresh_s = 0;
+  input.ended = "watch stopped";
+  print(write_dashboard(input, page));
+  return 0;
 }
 
 }  // namespace
@@ -115,6 +155,38 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 0.999))
       ->capture_default_str();
 
+  std::vector<fs::path> dashboard_runs;
+  std::vector<std::string> dashboard_groups;
+  fs::path dashboard_out;
+  double dashboard_watch = 0.0;
+  indrive::deploy::DashboardInput dashboard;
+  auto* dashboard_cmd = app.add_subcommand(
+      "dashboard",
+      "write one self-contained HTML page (index.html) with the curves, tables, maps, videos, "
+      "config and process states of one run or several, overlaid");
+  dashboard_cmd->add_option("runs", dashboard_runs, "run directories, each its own line")
+      ->check(CLI::ExistingDirectory);
+  dashboard_cmd
+      ->add_option("--group", dashboard_groups,
+                   "LABEL=RUN[,RUN...]: runs drawn as their mean with a min-max band (the seeds "
+                   "of one method); repeatable")
+      ->expected(1)
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  dashboard_cmd->add_option(
+      "--out", dashboard_out,
+      "page to write (default: RUN/index.html for one run; required for several)");
+  dashboard_cmd->add_option("--title", dashboard.title, "page title (default: the run labels)");
+  dashboard_cmd
+      ->add_option("--watch", dashboard_watch,
+                   "rewrite the page every this many seconds until stopped (Ctrl-C); the page "
+                   "reloads itself meanwhile")
+      ->check(CLI::Range(0.0, 86400.0));
+  dashboard_cmd->add_option("--seen-town", dashboard.seen_town, "training town for the gap")
+      ->capture_default_str();
+  dashboard_cmd->add_option("--heldout-town", dashboard.heldout_town, "held-out town for the gap")
+      ->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
@@ -125,6 +197,32 @@ int main(int argc, char** argv) {
       // Set before the children start, as OpenMP reads it once at load; a user's value wins.
       ::setenv("OMP_WAIT_POLICY", "passive", /*overwrite=*/0);
       return indrive::deploy::run_launch(launch);
+    }
+    if (*dashboard_cmd) {
+      if (dashboard_runs.empty() && dashboard_groups.empty()) {
+        throw std::invalid_argument("dashboard: name run directories or --group LABEL=RUN,RUN");
+      }
+      for (const auto& run : dashboard_runs) {
+        dashboard.runs.push_back(indrive::deploy::single_run_group(run));
+      }
+      for (const auto& spec : dashboard_groups) {
+        dashboard.runs.push_back(indrive::deploy::parse_compare_group(spec));
+        for (const auto& run : dashboard.runs.back().runs) {
+          if (!fs::is_directory(run)) {
+            throw std::invalid_argument("--group " + spec + ": " + run.string() +
+                                        " is not a directory");
+          }
+        }
+      }
+      if (dashboard_out.empty()) {
+        if (dashboard_runs.size() != 1 || !dashboard_groups.empty()) {
+          throw std::invalid_argument(
+              "dashboard: a page over several runs needs --out PAGE.html (one run's page goes "
+              "to RUN/index.html)");
+        }
+        dashboard_out = dashboard_runs[0] / "index.html";
+      }
+      return run_dashboard(dashboard, dashboard_out, dashboard_watch);
     }
     if (*plot_cmd) {
       const bool has_metrics = fs::exists(plot_run / "metrics.jsonl");

@@ -1,0 +1,718 @@
+#include "indrive/deploy/dashboard.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/videoio.hpp>
+#include <sstream>
+
+#include "indrive/basics/episode_csv.h"
+#include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/deploy/report.h"
+
+namespace indrive::deploy {
+namespace fs = std::filesystem;
+namespace {
+
+// Videos transcoded and shown per run; the rest are named with their folder.
+constexpr std::size_t kMaxVideosPerRun = 12;
+
+std::string escape_html(std::string_view text) {
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string read_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError("cannot open " + path.string());
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+std::string base64(std::string_view bytes) {
+  static constexpr char kDigits[] =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  std::size_t i = 0;
+  for (; i + 2 < bytes.size(); i += 3) {
+    const unsigned v = static_cast<unsigned char>(bytes[i]) << 16 |
+                       static_cast<unsigned char>(bytes[i + 1]) << 8 |
+                       static_cast<unsigned char>(bytes[i + 2]);
+    for (int k = 18; k >= 0; k -= 6) out += kDigits[(v >> k) & 63];
+  }
+  if (i < bytes.size()) {
+    unsigned v = static_cast<unsigned char>(bytes[i]) << 16;
+    if (i + 1 < bytes.size()) v |= static_cast<unsigned char>(bytes[i + 1]) << 8;
+    out += kDigits[(v >> 18) & 63];
+    out += kDigits[(v >> 12) & 63];
+    out += i + 1 < bytes.size() ? kDigits[(v >> 6) & 63] : '=';
+    out += '=';
+  }
+  return out;
+}
+
+// Six significant digits: what a reader can tell apart on a chart, and half the bytes of
+// full precision on a 10,000-line run.
+void append_number(std::string& out, double value) {
+  if (!std::isfinite(value)) {
+    out += "null";
+    return;
+  }
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.6g", value);
+  out += buffer;
+}
+
+void append_numbers(std::string& out, const std::vector<double>& values) {
+  out += '[';
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (i > 0) out += ',';
+    append_number(out, values[i]);
+  }
+  out += ']';
+}
+
+std::string local_time(std::time_t when) {
+  char text[32];
+  std::tm parts{};
+  localtime_r(&when, &parts);
+  std::strftime(text, sizeof(text), "%Y-%m-%d %H:%M:%S", &parts);
+  return text;
+}
+
+// The markdown of render_markdown (headings, paragraphs, pipe tables) as HTML.
+std::string markdown_to_html(const std::string& markdown) {
+  std::ostringstream html;
+  std::istringstream lines(markdown);
+  bool in_table = false;
+  bool header_row = false;
+  const auto cells = [](const std::string& line) {
+    std::vector<std::string> out;
+    std::string cell;
+    for (std::size_t i = 1; i < line.size(); ++i) {
+      if (line[i] == '|') {
+        out.push_back(cell);
+        cell.clear();
+      } else {
+        cell += line[i];
+      }
+    }
+    for (auto& c : out) {
+      c.erase(0, c.find_first_not_of(' '));
+      c.erase(c.find_last_not_of(' ') + 1);
+    }
+    return out;
+  };
+  for (std::string line; std::getline(lines, line);) {
+    const bool table_line = line.starts_with("|");
+    if (in_table && !table_line) {
+      html << "</table>\n";
+      in_table = false;
+    }
+    if (table_line) {
+      if (!in_table) {
+        html << "<table>\n";
+        in_table = true;
+        header_row = true;
+      }
+      const auto row = cells(line);
+      if (!row.empty() && row[0].starts_with("---")) continue;  // the separator line
+      html << "<tr>";
+      for (const auto& cell : row) {
+        html << (header_row ? "<th>" : "<td>") << escape_html(cell)
+             << (header_row ? "</th>" : "</td>");
+      }
+      html << "</tr>\n";
+      header_row = false;
+    } else if (line.starts_with("### ")) {
+      html << "<h4>" << escape_html(line.substr(4)) << "</h4>\n";
+    } else if (line.starts_with("## ")) {
+      html << "<h3>" << escape_html(line.substr(3)) << "</h3>\n";
+    } else if (line.starts_with("# ")) {
+      continue;  // the page has its own section title
+    } else if (!line.empty()) {
+      html << "<p>" << escape_html(line) << "</p>\n";
+    }
+  }
+  if (in_table) html << "</table>\n";
+  return html.str();
+}
+
+struct Series {
+  std::string label;
+  int colour = 0;
+  std::vector<double> x, y, low, high;  // low/high empty: no band
+};
+
+struct Chart {
+  std::string group;
+  std::string title;
+  std::string y_label;
+  std::vector<Series> series;
+};
+
+// Data points of one series that a chart draws (NaN and infinity are gaps).
+std::size_t finite_points(const Series& s) {
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < s.y.size(); ++i) n += std::isfinite(s.x[i]) && std::isfinite(s.y[i]);
+  return n;
+}
+
+// Every chart of the page, from the groups' metrics.jsonl files and evaluation curves.
+std::vector<Chart> build_charts(const std::vector<CompareGroup>& groups) {
+  std::map<std::pair<std::string, std::string>, Chart> charts;  // (group, title) -> chart
+  const auto chart = [&](const std::string& group, const std::string& title,
+                         const std::string& y_label) -> Chart& {
+    Chart& c = charts[{group, title}];
+    c.group = group;
+    c.title = title;
+    c.y_label = y_label;
+    return c;
+  };
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    const CompareGroup& group = groups[g];
+    const int colour = static_cast<int>(g);
+    // key -> one (x, y) per run of the group that logs it
+    std::map<std::string, std::vector<std::pair<std::vector<double>, std::vector<double>>>> keys;
+    std::vector<fs::path> curve_files;
+    for (const auto& run : group.runs) {
+      if (fs::exists(run / "metrics.jsonl")) {
+        for (auto& [key, xy] : read_metric_columns(run / "metrics.jsonl")) {
+          keys[key].push_back(std::move(xy));
+        }
+      }
+      if (fs::is_directory(run / "eval")) {
+        for (const auto& entry : fs::directory_iterator(run / "eval")) {
+          const std::string name = entry.path().filename().string();
+          if (name.starts_with("curve-") && entry.path().extension() == ".csv") {
+            curve_files.push_back(entry.path());
+          }
+        }
+      }
+    }
+    for (auto& [key, runs] : keys) {
+      const std::string group_name = dashboard_chart_group(key);
+      const bool dropped = key.starts_with("dropped_");
+      // Dropped messages: one chart, a line per reason (and run).
+      Chart& c = dropped ? chart(group_name, "dropped messages by reason", "messages (cumulative)")
+                         : chart(group_name, key, "");
+      const std::string reason = dropped ? key.substr(std::string("dropped_").size()) : "";
+      const std::string label = dropped ? group.label + ": " + reason : group.label;
+      const int series_colour =
+          dropped ? static_cast<int>(c.series.size()) : colour;  // reasons need their own colours
+      if (runs.size() == 1) {
+        c.series.push_back({label, series_colour, std::move(runs[0].first),
+                            std::move(runs[0].second), {}, {}});
+        continue;
+      }
+      try {
+        MeanBand band = mean_band(runs);
+        c.series.push_back({label + " (mean of " + std::to_string(runs.size()) + ", band min-max)",
+                            series_colour, std::move(band.x), std::move(band.mean),
+                            std::move(band.low), std::move(band.high)});
+      } catch (const std::invalid_argument& error) {
+        INDRIVE_LOG(kWarn, "dashboard") << group.label << ", " << key << ": " << error.what()
+                                        << "; its runs are not drawn as one band";
+      }
+    }
+    std::sort(curve_files.begin(), curve_files.end());
+    const EvalCurves curves = read_eval_curves(curve_files);
+    for (const auto& [town, points] : curves) {
+      Series sr{group.label + " " + town, colour, {}, {}, {}, {}};
+      Series rc = sr;
+      for (const auto& p : points) {
+        sr.x.push_back(p.env_steps);
+        sr.y.push_back(100.0 * p.success_rate);
+        rc.x.push_back(p.env_steps);
+        rc.y.push_back(100.0 * p.route_completion);
+      }
+      chart("evaluation", "success rate (continuous evaluator)", "SR %")
+          .series.push_back(std::move(sr));
+      chart("evaluation", "route completion (continuous evaluator)", "mean route completion %")
+          .series.push_back(std::move(rc));
+    }
+  }
+  // Two towns of one group share its colour: give each series of a chart its own where a
+  // chart has more series than groups.
+  std::vector<Chart> ordered;
+  for (const auto& name : dashboard_chart_groups()) {
+    for (auto& [key, c] : charts) {
+      if (key.first != name) continue;
+      if (c.group == "evaluation") {
+        for (std::size_t i = 0; i < c.series.size(); ++i) c.series[i].colour = static_cast<int>(i);
+      }
+      ordered.push_back(std::move(c));
+    }
+  }
+  return ordered;
+}
+
+// The charts as one JSON object: x arrays shared between the series that have the same one
+// (every key of one metrics.jsonl usually does), so a long run's steps are written once.
+std::string charts_json(const std::vector<Chart>& charts, std::size_t* points) {
+  std::map<std::vector<double>, std::size_t> x_index;
+  std::vector<const std::vector<double>*> xs;
+  std::string body = "\"charts\":[";
+  for (std::size_t c = 0; c < charts.size(); ++c) {
+    const Chart& chart = charts[c];
+    if (c > 0) body += ',';
+    body += "{\"id\":\"chart" + std::to_string(c) + "\",\"group\":" +
+            nlohmann::json(chart.group).dump() + ",\"title\":" + nlohmann::json(chart.title).dump() +
+            ",\"y_label\":" + nlohmann::json(chart.y_label).dump() + ",\"series\":[";
+    for (std::size_t s = 0; s < chart.series.size(); ++s) {
+      const Series& series = chart.series[s];
+      auto [it, inserted] = x_index.try_emplace(series.x, xs.size());
+      if (inserted) xs.push_back(&it->first);
+      if (s > 0) body += ',';
+      body += "{\"label\":" + nlohmann::json(series.label).dump() +
+              ",\"colour\":" + std::to_string(series.colour) +
+              ",\"xi\":" + std::to_string(it->second) + ",\"y\":";
+      append_numbers(body, series.y);
+      if (!series.low.empty()) {
+        body += ",\"low\":";
+        append_numbers(body, series.low);
+        body += ",\"high\":";
+        append_numbers(body, series.high);
+      }
+      body += '}';
+      if (points != nullptr) *points += finite_points(series);
+    }
+    body += "]}";
+  }
+  body += ']';
+  std::string out = "{\"xs\":[";
+  for (std::size_t i = 0; i < xs.size(); ++i) {
+    if (i > 0) out += ',';
+    append_numbers(out, *xs[i]);
+  }
+  out += "]," + body + "}";
+  return out;
+}
+
+// `name.mp4` of a run as a WebM beside the page (kept while newer than its source).
+std::optional<fs::path> browser_video(const fs::path& source, const fs::path& target) {
+  std::error_code error;
+  if (fs::exists(target) &&
+      fs::last_write_time(target, error) >= fs::last_write_time(source, error)) {
+    return target;
+  }
+  cv::VideoCapture in(source.string(), cv::CAP_FFMPEG);
+  if (!in.isOpened()) {
+    INDRIVE_LOG(kWarn, "dashboard") << "cannot read video " << source.string()
+                                    << "; it is left out";
+    return std::nullopt;
+  }
+  const double fps = in.get(cv::CAP_PROP_FPS) > 0 ? in.get(cv::CAP_PROP_FPS) : 10.0;
+  const cv::Size size(static_cast<int>(in.get(cv::CAP_PROP_FRAME_WIDTH)),
+                      static_cast<int>(in.get(cv::CAP_PROP_FRAME_HEIGHT)));
+  fs::create_directories(target.parent_path());
+  const fs::path partial = target.string() + ".partial.webm";
+  cv::VideoWriter out(partial.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('V', 'P', '8', '0'),
+                      fps, size, true);
+  if (!out.isOpened()) {
+    INDRIVE_LOG(kWarn, "dashboard") << "cannot write a WebM video (OpenCV's FFmpeg backend, VP8); "
+                                    << source.string() << " is left out";
+    return std::nullopt;
+  }
+  cv::Mat frame;
+  while (in.read(frame)) out.write(frame);
+  out.release();
+  fs::rename(partial, target);
+  return target;
+}
+
+std::string status_html(const fs::path& status_file) {
+  nlohmann::json status;
+  try {
+    status = nlohmann::json::parse(read_text(status_file));
+  } catch (const nlohmann::json::exception& error) {
+    throw IoError(status_file.string() + " is not JSON (" + error.what() +
+                  "); it is written by indrive launch");
+  }
+  std::ostringstream html;
+  html << "<p>as of " << escape_html(status.value("written", std::string("?")));
+  if (status.contains("state")) html << " (" << escape_html(status.value("state", "")) << ")";
+  html << "</p>\n<table><tr><th>process</th><th>state</th><th>pid</th><th>restarts</th>"
+          "<th>last exit code</th><th>last output line</th></tr>\n";
+  for (const auto& p : status.value("processes", nlohmann::json::array())) {
+    html << "<tr><td>" << escape_html(p.value("name", "")) << "</td><td class=\"state-"
+         << escape_html(p.value("state", "")) << "\">" << escape_html(p.value("state", ""))
+         << "</td><td>" << p.value("pid", -1) << "</td><td>" << p.value("restarts", 0)
+         << "</td><td>" << p.value("last_exit_code", 0) << "</td><td><code>"
+         << escape_html(p.value("last_line", "")) << "</code></td></tr>\n";
+  }
+  html << "</table>\n";
+  return html.str();
+}
+
+constexpr const char* kStyle = R"css(
+body{font:14px/1.4 system-ui,sans-serif;margin:0;color:#222;background:#fafafa}
+header{background:#263238;color:#fff;padding:10px 20px;position:sticky;top:0;z-index:2}
+header h1{font-size:18px;margin:0}header .state{font-size:13px;opacity:.85}
+header nav a{color:#b3e5fc;margin-right:14px;font-size:13px}
+header .live{color:#a5d6a7}header .ended{color:#ffcc80}
+main{padding:10px 20px}section{margin-bottom:24px}h2{border-bottom:1px solid #ccc}
+.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(440px,1fr));gap:12px}
+.chart{background:#fff;border:1px solid #ddd;border-radius:4px;padding:6px;position:relative;
+height:280px}.chart canvas{width:100%!important;height:100%!important}
+.zoombox{position:absolute;background:rgba(33,150,243,.15);border:1px solid #2196f3;
+pointer-events:none;display:none}
+table{border-collapse:collapse;background:#fff;margin:6px 0}
+td,th{border:1px solid #ddd;padding:3px 7px;font-size:13px;text-align:left}th{background:#eceff1}
+figure{display:inline-block;margin:6px;vertical-align:top}figure img{max-width:560px;
+border:1px solid #ddd;image-rendering:pixelated}video{max-width:520px;border:1px solid #ddd}
+pre{background:#fff;border:1px solid #ddd;padding:8px;overflow:auto;max-height:480px}
+.controls{margin:6px 0;font-size:13px}.note{color:#666;font-size:13px}
+.state-failed,.state-waiting_restart{color:#c62828;font-weight:bold}.state-running{color:#2e7d32}
+)css";
+
+// Draws every chart, records what it holds in data-* attributes of <body> (read by the
+// browser test) and wires hover, drag-to-zoom (double-click resets) and smoothing.
+constexpr const char* kScript = R"js(
+(function () {
+  const errors = [];
+  const report = () => { document.body.dataset.errors = JSON.stringify(errors); };
+  window.addEventListener('error', e => { errors.push(String(e.message)); report(); });
+  report();
+  const palette = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b',
+                   '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
+  const colour = (i, alpha) => {
+    const c = palette[i % palette.length];
+    if (alpha === undefined) return c;
+    const n = parseInt(c.slice(1), 16);
+    return `rgba(${n >> 16},${(n >> 8) & 255},${n & 255},${alpha})`;
+  };
+  const points = (xs, ys) => {
+    const out = [];
+    for (let i = 0; i < ys.length; ++i) if (ys[i] !== null && xs[i] !== null) out.push({x: xs[i], y: ys[i]});
+    return out;
+  };
+  const smooth = (raw, weight) => {
+    if (weight <= 0 || raw.length < 50) return raw;
+    let ema = raw[0].y;
+    return raw.map(p => { ema = weight * ema + (1 - weight) * p.y; return {x: p.x, y: ema}; });
+  };
+  const charts = [];
+  const counts = {};
+  for (const spec of DATA.charts) {
+    const canvas = document.getElementById(spec.id);
+    const datasets = [];
+    for (const s of spec.series) {
+      const xs = DATA.xs[s.xi];
+      if (s.low) {
+        datasets.push({label: '\u200b' + s.label + ' low', data: points(xs, s.low), borderWidth: 0,
+                       pointRadius: 0, fill: false, backgroundColor: colour(s.colour, 0.15)});
+        datasets.push({label: '\u200b' + s.label + ' high', data: points(xs, s.high), borderWidth: 0,
+                       pointRadius: 0, fill: '-1', backgroundColor: colour(s.colour, 0.15)});
+      }
+      const raw = points(xs, s.y);
+      datasets.push({label: s.label, raw: raw, data: raw, borderColor: colour(s.colour),
+                     backgroundColor: colour(s.colour), borderWidth: 1.5,
+                     pointRadius: raw.length < 30 ? 2.5 : 0, fill: false});
+    }
+    const chart = new Chart(canvas, {
+      type: 'line',
+      data: {datasets: datasets},
+      options: {
+        animation: false, parsing: false, normalized: true, spanGaps: true,
+        maintainAspectRatio: false,
+        interaction: {mode: 'nearest', axis: 'x', intersect: false},
+        scales: {x: {type: 'linear', title: {display: true, text: DATA.x_key}},
+                 y: {title: {display: spec.y_label !== '', text: spec.y_label}}},
+        plugins: {
+          title: {display: true, text: spec.title},
+          legend: {labels: {boxWidth: 12, filter: item => !item.text.startsWith('\u200b')}},
+          tooltip: {filter: item => !item.dataset.label.startsWith('\u200b')},
+          decimation: {enabled: true, algorithm: 'lttb', samples: 800, threshold: 1000}
+        }
+      }
+    });
+    charts.push(chart);
+    counts[spec.title] = {};
+    for (const d of chart.data.datasets) {
+      if (d.label.startsWith('\u200b')) continue;
+      counts[spec.title][d.label] = (d._data || d.data).length;
+    }
+    // Drag across a chart to zoom into that range of the x axis; double-click to reset.
+    const box = document.createElement('div');
+    box.className = 'zoombox';
+    canvas.parentNode.appendChild(box);
+    let start = null;
+    canvas.addEventListener('mousedown', e => { start = e.offsetX; });
+    canvas.addEventListener('mousemove', e => {
+      if (start === null) return;
+      const area = chart.chartArea;
+      box.style.display = 'block';
+      box.style.left = (canvas.offsetLeft + Math.min(start, e.offsetX)) + 'px';
+      box.style.width = Math.abs(e.offsetX - start) + 'px';
+      box.style.top = (canvas.offsetTop + area.top) + 'px';
+      box.style.height = (area.bottom - area.top) + 'px';
+    });
+    window.addEventListener('mouseup', e => {
+      if (start === null) return;
+      const end = e.target === canvas ? e.offsetX : start;
+      box.style.display = 'none';
+      if (Math.abs(end - start) > 5) {
+        const scale = chart.scales.x;
+        chart.options.scales.x.min = scale.getValueForPixel(Math.min(start, end));
+        chart.options.scales.x.max = scale.getValueForPixel(Math.max(start, end));
+        chart.update('none');
+      }
+      start = null;
+    });
+    canvas.addEventListener('dblclick', () => {
+      delete chart.options.scales.x.min;
+      delete chart.options.scales.x.max;
+      chart.update('none');
+    });
+  }
+  const smoothing = document.getElementById('smoothing');
+  if (smoothing) smoothing.addEventListener('change', () => {
+    const weight = parseFloat(smoothing.value);
+    for (const chart of charts) {
+      for (const d of chart.data.datasets) if (d.raw) d.data = smooth(d.raw, weight);
+      chart.update('none');
+    }
+  });
+  document.body.dataset.points = JSON.stringify(counts);
+  document.body.dataset.charts = String(charts.length);
+  document.body.dataset.ready = '1';
+})();
+)js";
+
+}  // namespace
+
+const std::vector<std::string>& dashboard_chart_groups() {
+  static const std::vector<std::string> groups = {
+      "evaluation",         "world model", "intrinsic module", "behaviour",
+      "exploration",        "throughput and pacing", "dropped messages", "other"};
+  return groups;
+}
+
+std::string dashboard_chart_group(const std::string& metric) {
+  if (metric.starts_with("wm/")) return "world model";
+  if (metric.starts_with("intrinsic/")) return "intrinsic module";
+  if (metric.starts_with("expl/") || metric.starts_with("task/") ||
+      metric.starts_with("episode_return") || metric.starts_with("episode_success")) {
+    return "behaviour";
+  }
+  if (metric.starts_with("coverage_") || metric.starts_with("episode_") || metric == "episodes") {
+    return "exploration";
+  }
+  if (metric.starts_with("dropped_")) return "dropped messages";
+  if (metric.starts_with("time/") || metric.ends_with("_per_s") || metric.starts_with("replay_") ||
+      metric.starts_with("policy_") || metric.starts_with("snapshot") || metric == "updates" ||
+      metric == "chunks" || metric == "learner_epoch" || metric == "sequence_gaps" ||
+      metric.starts_with("checkpoint") || metric == "failed_updates") {
+    return "throughput and pacing";
+  }
+  return "other";
+}
+
+std::string render_dashboard(const DashboardInput& input, const fs::path& page_dir,
+                             DashboardStats* stats) {
+  if (input.runs.empty()) throw std::invalid_argument("dashboard: name at least one run");
+  std::vector<fs::path> all_runs;
+  for (const auto& group : input.runs) {
+    if (group.runs.empty()) throw std::invalid_argument("group '" + group.label + "' has no runs");
+    for (const auto& run : group.runs) {
+      if (!fs::exists(run / "metrics.jsonl") && !fs::is_directory(run / "eval") &&
+          !fs::exists(run / "config.yaml")) {
+        throw IoError(run.string() +
+                      " has no metrics.jsonl, eval/ or config.yaml: is it a run directory (the "
+                      "folder indrive launch or indrive-train-local --run-dir wrote)?");
+      }
+      all_runs.push_back(run);
+    }
+  }
+  std::string title = input.title;
+  if (title.empty()) {
+    for (const auto& group : input.runs) title += (title.empty() ? "" : ", ") + group.label;
+  }
+
+  const std::vector<Chart> charts = build_charts(input.runs);
+  std::size_t points = 0;
+  const std::string data = charts_json(charts, &points);
+
+  std::ostringstream html;
+  html << "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>indrive: "
+       << escape_html(title) << "</title>\n";
+  if (input.live_refresh_s > 0) {
+    html << "<meta http-equiv=\"refresh\" content=\""
+         << std::max(1, static_cast<int>(std::lround(input.live_refresh_s))) << "\">\n";
+  }
+  html << "<style>" << kStyle << "</style>\n<script>" << chartjs_source() << "</script>\n";
+  html << "</head><body>\n<header><h1>" << escape_html(title) << "</h1><div class=\"state\">";
+  const std::string now = local_time(std::time(nullptr));
+  if (input.live_refresh_s > 0) {
+    html << "<span class=\"live\">live</span>: written " << now << ", reloads every "
+         << std::lround(input.live_refresh_s) << " s while the run goes on";
+  } else if (!input.ended.empty()) {
+    html << "<span class=\"ended\">" << escape_html(input.ended) << "</span>; page written " << now;
+  } else {
+    html << "written " << now;
+  }
+  html << "</div><nav><a href=\"#curves\">curves</a><a href=\"#tables\">tables</a>"
+          "<a href=\"#maps\">maps</a><a href=\"#videos\">videos</a><a href=\"#processes\">"
+          "processes</a><a href=\"#config\">config</a></nav></header>\n<main>\n";
+
+  // Curves, grouped.
+  html << "<section id=\"curves\"><h2>Curves</h2><div class=\"controls\">against "
+       << "env steps; hover for values, drag across a chart to zoom, double-click to reset. "
+       << "Smoothing <select id=\"smoothing\"><option value=\"0\">none</option>"
+       << "<option value=\"0.6\">0.6</option><option value=\"0.9\">0.9</option>"
+       << "<option value=\"0.97\">0.97</option></select> (series of 50 points or more)</div>\n";
+  if (charts.empty()) html << "<p class=\"note\">no metrics yet</p>\n";
+  std::string open_group;
+  for (std::size_t c = 0; c < charts.size(); ++c) {
+    if (charts[c].group != open_group) {
+      if (!open_group.empty()) html << "</div>\n";
+      open_group = charts[c].group;
+      html << "<h3>" << escape_html(open_group) << "</h3><div class=\"grid\">\n";
+    }
+    html << "<div class=\"chart\"><canvas id=\"chart" << c << "\"></canvas></div>\n";
+  }
+  if (!open_group.empty()) html << "</div>\n";
+  html << "</section>\n";
+
+  // The report's tables.
+  html << "<section id=\"tables\"><h2>Tables</h2>\n";
+  try {
+    const Report report = aggregate(load_results(all_runs));
+    html << markdown_to_html(render_markdown(report, input.seen_town, input.heldout_town));
+  } catch (const CsvError&) {
+    html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
+  } catch (const std::invalid_argument&) {
+    html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
+  }
+  html << "</section>\n";
+
+  // Coverage and town maps.
+  std::size_t pictures = 0;
+  html << "<section id=\"maps\"><h2>Coverage and town maps</h2>\n";
+  for (const auto& group : input.runs) {
+    for (const auto& run : group.runs) {
+      std::vector<fs::path> pngs;
+      if (fs::is_directory(run / "plots")) {
+        for (const auto& entry : fs::directory_iterator(run / "plots")) {
+          const std::string name = entry.path().filename().string();
+          if (entry.path().extension() == ".png" &&
+              (name.starts_with("coverage_map") || name.starts_with("town"))) {
+            pngs.push_back(entry.path());
+          }
+        }
+      }
+      std::sort(pngs.begin(), pngs.end());
+      for (const auto& png : pngs) {
+        html << "<figure><img alt=\"" << escape_html(png.filename().string())
+             << "\" src=\"data:image/png;base64," << base64(read_text(png))
+             << "\"><figcaption>" << escape_html(run.filename().string() + ": " +
+                                                 png.filename().string())
+             << "</figcaption></figure>\n";
+        ++pictures;
+      }
+    }
+  }
+  if (pictures == 0) {
+    html << "<p class=\"note\">no coverage or town maps in the runs' plots/ (indrive plot RUN "
+            "draws the coverage map)</p>\n";
+  }
+  html << "</section>\n";
+
+  // Videos, transcoded beside the page.
+  std::size_t videos = 0;
+  html << "<section id=\"videos\"><h2>Evaluation videos</h2>\n";
+  for (const auto& group : input.runs) {
+    for (const auto& run : group.runs) {
+      std::vector<fs::path> files;
+      if (fs::is_directory(run / "videos")) {
+        for (const auto& entry : fs::directory_iterator(run / "videos")) {
+          if (entry.path().extension() == ".mp4") files.push_back(entry.path());
+        }
+      }
+      std::sort(files.begin(), files.end());
+      const std::string run_name = run.lexically_normal().filename().string();
+      for (std::size_t i = 0; i < files.size() && i < kMaxVideosPerRun; ++i) {
+        const fs::path target =
+            page_dir / "media" / (run_name + "-" + files[i].stem().string() + ".webm");
+        const auto video = browser_video(files[i], target);
+        if (!video) continue;
+        html << "<figure><video controls muted loop preload=\"metadata\" src=\"media/"
+             << escape_html(video->filename().string()) << "\"></video><figcaption>"
+             << escape_html(run_name + ": " + files[i].filename().string())
+             << "</figcaption></figure>\n";
+        ++videos;
+      }
+      if (files.size() > kMaxVideosPerRun) {
+        html << "<p class=\"note\">" << files.size() - kMaxVideosPerRun << " more in "
+             << escape_html((run / "videos").string()) << "</p>\n";
+      }
+    }
+  }
+  if (videos == 0) {
+    html << "<p class=\"note\">no videos (evaluators record them with "
+            "evaluation.video_episodes)</p>\n";
+  }
+  html << "</section>\n";
+
+  // Processes and the resolved configs.
+  html << "<section id=\"processes\"><h2>Processes</h2>\n";
+  bool any_status = false;
+  for (const auto& run : all_runs) {
+    if (!fs::exists(run / "status.json")) continue;
+    any_status = true;
+    html << "<h4>" << escape_html(run.string()) << "</h4>" << status_html(run / "status.json");
+  }
+  if (!any_status) {
+    html << "<p class=\"note\">no status.json (written by indrive launch while it runs)</p>\n";
+  }
+  html << "</section>\n<section id=\"config\"><h2>Resolved config</h2>\n";
+  for (const auto& run : all_runs) {
+    if (!fs::exists(run / "config.yaml")) continue;
+    html << "<details><summary>" << escape_html((run / "config.yaml").string())
+         << "</summary><pre>" << escape_html(read_text(run / "config.yaml"))
+         << "</pre></details>\n";
+  }
+  html << "</section>\n</main>\n<script>const DATA = {\"x_key\":\"env_steps\"," << data.substr(1)
+       << ";\n" << kScript << "</script>\n</body></html>\n";
+  if (stats != nullptr) {
+    stats->charts = charts.size();
+    stats->points = points;
+    stats->videos = videos;
+    stats->pictures = pictures;
+  }
+  return html.str();
+}
+
+DashboardStats write_dashboard(const DashboardInput& input, const fs::path& page) {
+  const auto start = std::chrono::steady_clock::now();
+  DashboardStats stats;
+  const fs::path dir = page.has_parent_path() ? page.parent_path() : fs::path(".");
+  fs::create_directories(dir);
+  const std::string html = render_dashboard(input, dir, &stats);
+  atomic_write(page, html);
+  stats.page = page;
+  stats.bytes = html.size();
+  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return stats;
+}
+
+}  // namespace indrive::deploy
