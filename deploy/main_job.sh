@@ -30,8 +30,11 @@ for town in town01 town02; do
 done
 "$bin/indrive-env" episode --town town02 --route two_turn --density 10 --policy follower \
   --seed 2 --video "$run/videos/town02_two_turn_follower.mp4" --quiet
+# The run's page again, now with the town maps and the video.
+"$bin/indrive" dashboard "$run" > /dev/null
 
 say "done. Run directory: $run"
+say "  page:        $run/index.html (open it in a browser: curves, tables, maps, video, config)"
 say "  report:      $run/report.md (also .csv, .tex)"
 say "  curves:      $run/plots/*.png ($(ls "$run/plots" | wc -l) files)"
 say "  metrics:     $run/metrics.jsonl; evaluation rows: $run/eval/*.csv"

@@ -28,11 +28,20 @@ std::string escape_html(std::string_view text) {
   out.reserve(text.size());
   for (const char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -219,8 +228,8 @@ std::vector<Chart> build_charts(const std::vector<CompareGroup>& groups) {
       const int series_colour =
           dropped ? static_cast<int>(c.series.size()) : colour;  // reasons need their own colours
       if (runs.size() == 1) {
-        c.series.push_back({label, series_colour, std::move(runs[0].first),
-                            std::move(runs[0].second), {}, {}});
+        c.series.push_back(
+            {label, series_colour, std::move(runs[0].first), std::move(runs[0].second), {}, {}});
         continue;
       }
       try {
@@ -274,8 +283,9 @@ std::string charts_json(const std::vector<Chart>& charts, std::size_t* points) {
   for (std::size_t c = 0; c < charts.size(); ++c) {
     const Chart& chart = charts[c];
     if (c > 0) body += ',';
-    body += "{\"id\":\"chart" + std::to_string(c) + "\",\"group\":" +
-            nlohmann::json(chart.group).dump() + ",\"title\":" + nlohmann::json(chart.title).dump() +
+    body += "{\"id\":\"chart" + std::to_string(c) +
+            "\",\"group\":" + nlohmann::json(chart.group).dump() +
+            ",\"title\":" + nlohmann::json(chart.title).dump() +
             ",\"y_label\":" + nlohmann::json(chart.y_label).dump() + ",\"series\":[";
     for (std::size_t s = 0; s < chart.series.size(); ++s) {
       const Series& series = chart.series[s];
@@ -316,8 +326,8 @@ std::optional<fs::path> browser_video(const fs::path& source, const fs::path& ta
   }
   cv::VideoCapture in(source.string(), cv::CAP_FFMPEG);
   if (!in.isOpened()) {
-    INDRIVE_LOG(kWarn, "dashboard") << "cannot read video " << source.string()
-                                    << "; it is left out";
+    INDRIVE_LOG(kWarn, "dashboard")
+        << "cannot read video " << source.string() << "; it is left out";
     return std::nullopt;
   }
   const double fps = in.get(cv::CAP_PROP_FPS) > 0 ? in.get(cv::CAP_PROP_FPS) : 10.0;
@@ -410,6 +420,12 @@ constexpr const char* kScript = R"js(
     let ema = raw[0].y;
     return raw.map(p => { ema = weight * ema + (1 - weight) * p.y; return {x: p.x, y: ema}; });
   };
+  // Axis ticks: plain numbers with a few significant digits, exponents only where needed.
+  const tick = v => {
+    const a = Math.abs(v);
+    if (a !== 0 && (a < 1e-3 || a >= 1e7)) return Number(v).toExponential(1);
+    return Number(v).toLocaleString('en', {maximumSignificantDigits: 4});
+  };
   const charts = [];
   const counts = {};
   for (const spec of DATA.charts) {
@@ -435,8 +451,10 @@ constexpr const char* kScript = R"js(
         animation: false, parsing: false, normalized: true, spanGaps: true,
         maintainAspectRatio: false,
         interaction: {mode: 'nearest', axis: 'x', intersect: false},
-        scales: {x: {type: 'linear', title: {display: true, text: DATA.x_key}},
-                 y: {title: {display: spec.y_label !== '', text: spec.y_label}}},
+        scales: {x: {type: 'linear', title: {display: true, text: DATA.x_key},
+                     ticks: {callback: tick}},
+                 y: {title: {display: spec.y_label !== '', text: spec.y_label},
+                     ticks: {callback: tick}}},
         plugins: {
           title: {display: true, text: spec.title},
           legend: {labels: {boxWidth: 12, filter: item => !item.text.startsWith('\u200b')}},
@@ -502,8 +520,8 @@ constexpr const char* kScript = R"js(
 
 const std::vector<std::string>& dashboard_chart_groups() {
   static const std::vector<std::string> groups = {
-      "evaluation",         "world model", "intrinsic module", "behaviour",
-      "exploration",        "throughput and pacing", "dropped messages", "other"};
+      "evaluation",  "world model",           "intrinsic module", "behaviour",
+      "exploration", "throughput and pacing", "dropped messages", "other"};
   return groups;
 }
 
@@ -562,11 +580,24 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   html << "<style>" << kStyle << "</style>\n<script>" << chartjs_source() << "</script>\n";
   html << "</head><body>\n<header><h1>" << escape_html(title) << "</h1><div class=\"state\">";
   const std::string now = local_time(std::time(nullptr));
+  std::string ended = input.ended;
+  if (ended.empty() && input.live_refresh_s <= 0 && all_runs.size() == 1 &&
+      fs::exists(all_runs[0] / "status.json")) {
+    // A run that `indrive launch` ran to its end says so in its status file.
+    try {
+      const auto status = nlohmann::json::parse(read_text(all_runs[0] / "status.json"));
+      if (status.value("state", "") == "ended") {
+        ended = "ended " + status.value("written", std::string("?"));
+      }
+    } catch (const nlohmann::json::exception&) {
+      // status_html below names the broken file.
+    }
+  }
   if (input.live_refresh_s > 0) {
     html << "<span class=\"live\">live</span>: written " << now << ", reloads every "
          << std::lround(input.live_refresh_s) << " s while the run goes on";
-  } else if (!input.ended.empty()) {
-    html << "<span class=\"ended\">" << escape_html(input.ended) << "</span>; page written " << now;
+  } else if (!ended.empty()) {
+    html << "<span class=\"ended\">" << escape_html(ended) << "</span>; page written " << now;
   } else {
     html << "written " << now;
   }
@@ -623,9 +654,8 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
       std::sort(pngs.begin(), pngs.end());
       for (const auto& png : pngs) {
         html << "<figure><img alt=\"" << escape_html(png.filename().string())
-             << "\" src=\"data:image/png;base64," << base64(read_text(png))
-             << "\"><figcaption>" << escape_html(run.filename().string() + ": " +
-                                                 png.filename().string())
+             << "\" src=\"data:image/png;base64," << base64(read_text(png)) << "\"><figcaption>"
+             << escape_html(run.filename().string() + ": " + png.filename().string())
              << "</figcaption></figure>\n";
         ++pictures;
       }
@@ -687,12 +717,12 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   html << "</section>\n<section id=\"config\"><h2>Resolved config</h2>\n";
   for (const auto& run : all_runs) {
     if (!fs::exists(run / "config.yaml")) continue;
-    html << "<details><summary>" << escape_html((run / "config.yaml").string())
-         << "</summary><pre>" << escape_html(read_text(run / "config.yaml"))
-         << "</pre></details>\n";
+    html << "<details><summary>" << escape_html((run / "config.yaml").string()) << "</summary><pre>"
+         << escape_html(read_text(run / "config.yaml")) << "</pre></details>\n";
   }
   html << "</section>\n</main>\n<script>const DATA = {\"x_key\":\"env_steps\"," << data.substr(1)
-       << ";\n" << kScript << "</script>\n</body></html>\n";
+       << ";\n"
+       << kScript << "</script>\n</body></html>\n";
   if (stats != nullptr) {
     stats->charts = charts.size();
     stats->points = points;

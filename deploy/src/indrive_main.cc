@@ -103,6 +103,11 @@ int main(int argc, char** argv) {
       ->add_option("--status-interval", launch.status_interval_s,
                    "seconds between combined status lines")
       ->capture_default_str();
+  launch_cmd
+      ->add_option("--dashboard-interval", launch.dashboard_interval_s,
+                   "seconds between rewrites of the run's page, <run>/index.html (0: none)")
+      ->check(CLI::Range(0.0, 86400.0))
+      ->capture_default_str();
 
   std::vector<fs::path> report_inputs;
   fs::path report_out = "report";

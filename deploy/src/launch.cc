@@ -4,9 +4,14 @@
 
 #include <chrono>
 #include <cstdio>
+#include <ctime>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "indrive/basics/log.h"
+#include "indrive/basics/run_dir.h"
+#include "indrive/deploy/dashboard.h"
+#include "indrive/deploy/plot.h"
 
 namespace indrive::deploy {
 namespace fs = std::filesystem;
@@ -36,7 +41,88 @@ std::vector<std::string> common_args(const LaunchOptions& options, const fs::pat
   return args;
 }
 
+std::string now_text() {
+  char text[32];
+  const std::time_t now = std::time(nullptr);
+  std::tm parts{};
+  localtime_r(&now, &parts);
+  std::strftime(text, sizeof(text), "%Y-%m-%d %H:%M:%S", &parts);
+  return text;
+}
+
+// The run's page, refreshed while it runs; a failure to write it is logged once and never
+// stops the run.
+class PageRefresher {
+ public:
+  PageRefresher(const LaunchOptions& options, fs::path run_dir)
+      : interval_s_(options.dashboard_interval_s), run_dir_(std::move(run_dir)) {
+    input_.runs = {single_run_group(run_dir_)};
+    input_.title = options.run_id;
+  }
+
+  bool enabled() const { return interval_s_ > 0; }
+
+  void refresh(const std::vector<ChildStatus>& processes, bool ended, const std::string& why) {
+    if (!enabled()) return;
+    const auto start = std::chrono::steady_clock::now();
+    try {
+      write_status_json(run_dir_, processes, ended);
+      // The coverage map is redrawn from the actors' coverage files (none before they step).
+      plot_coverage(run_dir_, run_dir_ / "plots" / "coverage_map.png");
+      input_.live_refresh_s = ended ? 0.0 : interval_s_;
+      input_.ended = ended ? why : "";
+      const DashboardStats stats = write_dashboard(input_, run_dir_ / "index.html");
+      bytes_ = stats.bytes;
+    } catch (const std::exception& error) {
+      if (!warned_) {
+        INDRIVE_LOG(kWarn, "launch") << "the run's page was not written: " << error.what();
+        warned_ = true;
+      }
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ++writes_;
+    total_s_ += seconds;
+    max_s_ = std::max(max_s_, seconds);
+  }
+
+  // "page: <run>/index.html (N writes, mean X s, max Y s, Z KB)"
+  std::string summary() const {
+    std::ostringstream text;
+    text.precision(3);
+    text << "page: " << (run_dir_ / "index.html").string() << " (" << writes_ << " writes, mean "
+         << (writes_ > 0 ? total_s_ / writes_ : 0.0) << " s, max " << max_s_ << " s, "
+         << bytes_ / 1024 << " KB)";
+    return text.str();
+  }
+
+ private:
+  double interval_s_;
+  fs::path run_dir_;
+  DashboardInput input_;
+  bool warned_ = false;
+  int writes_ = 0;
+  double total_s_ = 0.0, max_s_ = 0.0;
+  std::size_t bytes_ = 0;
+};
+
 }  // namespace
+
+void write_status_json(const fs::path& run_dir, const std::vector<ChildStatus>& processes,
+                       bool ended) {
+  nlohmann::json status = {{"written", now_text()},
+                           {"state", ended ? "ended" : "running"},
+                           {"processes", nlohmann::json::array()}};
+  for (const auto& p : processes) {
+    status["processes"].push_back({{"name", p.name},
+                                   {"state", child_state_name(p.state)},
+                                   {"pid", p.pid},
+                                   {"restarts", p.restarts},
+                                   {"last_exit_code", p.last_exit_code},
+                                   {"last_line", p.last_line}});
+  }
+  atomic_write(run_dir / "status.json", status.dump(2) + "\n");
+}
 
 std::vector<ProcessSpec> launch_plan(const LaunchOptions& options) {
   const fs::path run_dir = options.runs_dir / options.run_id;
@@ -102,9 +188,22 @@ int run_launch(const LaunchOptions& options) {
   sigaction(SIGTERM, &action, nullptr);
 
   supervisor.start();
+  const fs::path run_dir = options.runs_dir / options.run_id;
+  PageRefresher page(options, run_dir);
+  if (page.enabled()) {
+    std::printf("%-12s | the run's page: %s (refreshed every %g s; open it in a browser)\n",
+                "launch", (run_dir / "index.html").c_str(), options.dashboard_interval_s);
+  }
   auto next_status = std::chrono::steady_clock::now();
+  auto next_page = next_status;
   while (supervisor.poll(std::chrono::milliseconds(200))) {
     const auto now = std::chrono::steady_clock::now();
+    if (page.enabled() && now >= next_page) {
+      page.refresh(supervisor.status(), /*ended=*/false, "");
+      next_page = std::chrono::steady_clock::now() +
+                  std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                      std::chrono::duration<double>(options.dashboard_interval_s));
+    }
     if (now < next_status) continue;
     next_status = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                             std::chrono::duration<double>(options.status_interval_s));
@@ -120,13 +219,19 @@ int run_launch(const LaunchOptions& options) {
   std::printf("%-12s | stopping all processes\n", "launch");
   supervisor.stop(std::chrono::seconds(15));
   g_supervisor = nullptr;
+  int exit_code = 0;
   for (const auto& status : supervisor.status()) {
     if (status.name == "learner") {
       // A learner stopped by our own SIGTERM counts as a clean stop.
-      return status.last_exit_code == 128 + SIGTERM ? 0 : status.last_exit_code;
+      exit_code = status.last_exit_code == 128 + SIGTERM ? 0 : status.last_exit_code;
     }
   }
-  return 0;
+  if (page.enabled()) {
+    page.refresh(supervisor.status(), /*ended=*/true,
+                 "ended " + now_text() + ", learner exit code " + std::to_string(exit_code));
+    std::printf("%-12s | %s\n", "launch", page.summary().c_str());
+  }
+  return exit_code;
 }
 
 }  // namespace indrive::deploy

@@ -24,7 +24,15 @@ struct LaunchOptions {
   std::vector<std::string> overrides;  // --set key=value, forwarded to every process
   std::filesystem::path bin_dir;       // where indrive-learner and indrive-actor live
   double status_interval_s = 10.0;     // how often the combined status line is printed
+  // How often <run>/status.json and the run's page, <run>/index.html (indrive dashboard), are
+  // rewritten while the run goes on; 0: neither is written.
+  double dashboard_interval_s = 30.0;
 };
+
+// <run>/status.json: the time, "running" or "ended", and each process's state, restarts, last
+// exit code and newest output line, as the run's page shows them.
+void write_status_json(const std::filesystem::path& run_dir,
+                       const std::vector<ChildStatus>& processes, bool ended);
 
 // The process specs for `options`: the learner (essential: its clean exit ends the run; a crash
 // is restarted with back-off, at most 10 times), actors restarted on failure with back-off,
@@ -32,6 +40,8 @@ struct LaunchOptions {
 std::vector<ProcessSpec> launch_plan(const LaunchOptions& options);
 
 // Runs the plan until the learner ends or SIGINT/SIGTERM arrives, then stops everything.
+// Meanwhile refreshes the run's page every dashboard_interval_s (the coverage map redrawn, the
+// page reloading itself) and writes it a last time when the run has ended; prints its path.
 // Returns the learner's exit code (0 on a clean stop by signal).
 int run_launch(const LaunchOptions& options);
 
