@@ -1,6 +1,7 @@
 #include "indrive/deploy/dashboard.h"
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -86,8 +87,9 @@ void append_number(std::string& out, double value) {
     return;
   }
   char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.6g", value);
-  out += buffer;
+  const auto result =
+      std::to_chars(buffer, buffer + sizeof(buffer), value, std::chars_format::general, 6);
+  out.append(buffer, result.ptr);
 }
 
 void append_numbers(std::string& out, const std::vector<double>& values) {
@@ -186,7 +188,7 @@ std::size_t finite_points(const Series& s) {
 }
 
 // Every chart of the page, from the groups' metrics.jsonl files and evaluation curves.
-std::vector<Chart> build_charts(const std::vector<CompareGroup>& groups) {
+std::vector<Chart> build_charts(const std::vector<CompareGroup>& groups, DashboardCache* cache) {
   std::map<std::pair<std::string, std::string>, Chart> charts;  // (group, title) -> chart
   const auto chart = [&](const std::string& group, const std::string& title,
                          const std::string& y_label) -> Chart& {
@@ -204,7 +206,9 @@ std::vector<Chart> build_charts(const std::vector<CompareGroup>& groups) {
     std::vector<fs::path> curve_files;
     for (const auto& run : group.runs) {
       if (fs::exists(run / "metrics.jsonl")) {
-        for (auto& [key, xy] : read_metric_columns(run / "metrics.jsonl")) {
+        MetricColumns columns = cache != nullptr ? cache->metrics(run / "metrics.jsonl")
+                                                 : read_metric_columns(run / "metrics.jsonl");
+        for (auto& [key, xy] : columns) {
           keys[key].push_back(std::move(xy));
         }
       }
@@ -518,6 +522,11 @@ constexpr const char* kScript = R"js(
 
 }  // namespace
 
+MetricColumns DashboardCache::metrics(const fs::path& metrics_jsonl) {
+  auto [it, inserted] = followers_.try_emplace(metrics_jsonl, metrics_jsonl);
+  return it->second.update();
+}
+
 const std::vector<std::string>& dashboard_chart_groups() {
   static const std::vector<std::string> groups = {
       "evaluation",  "world model",           "intrinsic module", "behaviour",
@@ -546,7 +555,7 @@ std::string dashboard_chart_group(const std::string& metric) {
 }
 
 std::string render_dashboard(const DashboardInput& input, const fs::path& page_dir,
-                             DashboardStats* stats) {
+                             DashboardStats* stats, DashboardCache* cache) {
   if (input.runs.empty()) throw std::invalid_argument("dashboard: name at least one run");
   std::vector<fs::path> all_runs;
   for (const auto& group : input.runs) {
@@ -566,7 +575,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
     for (const auto& group : input.runs) title += (title.empty() ? "" : ", ") + group.label;
   }
 
-  const std::vector<Chart> charts = build_charts(input.runs);
+  const std::vector<Chart> charts = build_charts(input.runs, cache);
   std::size_t points = 0;
   const std::string data = charts_json(charts, &points);
 
@@ -732,12 +741,13 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   return html.str();
 }
 
-DashboardStats write_dashboard(const DashboardInput& input, const fs::path& page) {
+DashboardStats write_dashboard(const DashboardInput& input, const fs::path& page,
+                               DashboardCache* cache) {
   const auto start = std::chrono::steady_clock::now();
   DashboardStats stats;
   const fs::path dir = page.has_parent_path() ? page.parent_path() : fs::path(".");
   fs::create_directories(dir);
-  const std::string html = render_dashboard(input, dir, &stats);
+  const std::string html = render_dashboard(input, dir, &stats, cache);
   atomic_write(page, html);
   stats.page = page;
   stats.bytes = html.size();

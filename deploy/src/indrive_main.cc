@@ -52,8 +52,9 @@ int run_dashboard(indrive::deploy::DashboardInput input, const fs::path& page, d
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
   input.live_refresh_s = watch_s;
+  indrive::deploy::DashboardCache cache;
   while (g_stop == 0) {
-    print(write_dashboard(input, page));
+    print(write_dashboard(input, page, &cache));
     const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(watch_s);
     while (g_stop == 0 && std::chrono::steady_clock::now() < until) {
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -61,7 +62,7 @@ int run_dashboard(indrive::deploy::DashboardInput input, const fs::path& page, d
   }
   input.live_refresh_s = 0;
   input.ended = "watch stopped";
-  print(write_dashboard(input, page));
+  print(write_dashboard(input, page, &cache));
   return 0;
 }
 

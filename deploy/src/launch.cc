@@ -71,7 +71,7 @@ class PageRefresher {
       plot_coverage(run_dir_, run_dir_ / "plots" / "coverage_map.png");
       input_.live_refresh_s = ended ? 0.0 : interval_s_;
       input_.ended = ended ? why : "";
-      const DashboardStats stats = write_dashboard(input_, run_dir_ / "index.html");
+      const DashboardStats stats = write_dashboard(input_, run_dir_ / "index.html", &cache_);
       bytes_ = stats.bytes;
     } catch (const std::exception& error) {
       if (!warned_) {
@@ -100,6 +100,7 @@ class PageRefresher {
   double interval_s_;
   fs::path run_dir_;
   DashboardInput input_;
+  DashboardCache cache_;  // each write reads only the metrics lines appended since the last
   bool warned_ = false;
   int writes_ = 0;
   double total_s_ = 0.0, max_s_ = 0.0;

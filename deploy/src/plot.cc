@@ -249,31 +249,67 @@ void LinePlot::save(const std::filesystem::path& path, int width, int height) co
   atomic_write(path, png);
 }
 
+MetricsFollower::MetricsFollower(std::filesystem::path metrics_jsonl, std::string x_key)
+    : path_(std::move(metrics_jsonl)), x_key_(std::move(x_key)) {}
+
+void MetricsFollower::add_line(const std::string& line, bool last_of_file) {
+  ++line_number_;
+  if (line.empty()) return;
+  nlohmann::json record;
+  try {
+    record = nlohmann::json::parse(line);
+  } catch (const nlohmann::json::exception&) {
+    // The last line of a crashed run may be cut short; anything else is corrupt.
+    if (last_of_file) return;
+    throw IoError(path_.string() + ":" + std::to_string(line_number_) + ": not JSON");
+  }
+  const auto x_value = record.find(x_key_);
+  if (x_value == record.end() || !x_value->is_number()) return;
+  const double x = x_value->get<double>();
+  for (const auto& [key, value] : record.items()) {
+    if (key == x_key_ || key == "time" || !value.is_number()) continue;
+    auto& column = columns_[key];
+    column.first.push_back(x);
+    column.second.push_back(value.get<double>());
+  }
+}
+
+const MetricColumns& MetricsFollower::update(bool final) {
+  std::error_code error;
+  const std::uintmax_t size = std::filesystem::file_size(path_, error);
+  if (error) return columns_;  // not written yet
+  if (size < offset_) {        // replaced by a shorter file: start again
+    offset_ = 0;
+    line_number_ = 0;
+    columns_.clear();
+  }
+  if (size == offset_) return columns_;
+  std::ifstream in(path_, std::ios::binary);
+  if (!in) throw IoError("cannot open " + path_.string());
+  in.seekg(static_cast<std::streamoff>(offset_));
+  std::string text(size - offset_, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  std::size_t begin = 0;
+  for (std::size_t end; (end = text.find('\n', begin)) != std::string::npos; begin = end + 1) {
+    // A complete line; a cut one is only forgiven at the very end of the file.
+    add_line(text.substr(begin, end - begin), /*last_of_file=*/final && end + 1 == text.size());
+  }
+  if (final && begin < text.size()) {
+    add_line(text.substr(begin), /*last_of_file=*/true);
+    begin = text.size();
+  }
+  offset_ += begin;
+  return columns_;
+}
+
 MetricColumns read_metric_columns(const std::filesystem::path& metrics_jsonl,
                                   const std::string& x_key) {
-  std::ifstream in(metrics_jsonl);
-  if (!in) throw IoError("cannot open " + metrics_jsonl.string());
-  MetricColumns columns;
-  int number = 0;
-  for (std::string line; std::getline(in, line);) {
-    ++number;
-    if (line.empty()) continue;
-    nlohmann::json record;
-    try {
-      record = nlohmann::json::parse(line);
-    } catch (const nlohmann::json::exception&) {
-      // The last line of a crashed run may be cut short; anything else is corrupt.
-      if (in.peek() == EOF) break;
-      throw IoError(metrics_jsonl.string() + ":" + std::to_string(number) + ": not JSON");
-    }
-    if (!record.contains(x_key) || !record[x_key].is_number()) continue;
-    const double x = record[x_key].get<double>();
-    for (const auto& [key, value] : record.items()) {
-      if (key == x_key || key == "time" || !value.is_number()) continue;
-      columns[key].first.push_back(x);
-      columns[key].second.push_back(value.get<double>());
-    }
-  }
+  if (!std::filesystem::exists(metrics_jsonl))
+    throw IoError("cannot open " + metrics_jsonl.string());
+  MetricsFollower follower(metrics_jsonl, x_key);
+  follower.update(/*final=*/true);
+  MetricColumns columns = follower.columns();
   return columns;
 }
 

@@ -57,6 +57,35 @@ TEST(PlotMetrics, WritesOnePngPerNumericKeyAndToleratesACutLastLine) {
   EXPECT_FALSE(cv::imread(files[0].string()).empty());
 }
 
+TEST(MetricsFollower, ReadsOnlyCompleteAppendedLinesAndStartsAgainOnAShorterFile) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "metrics.jsonl";
+  MetricsFollower follower(path);
+  EXPECT_TRUE(follower.update().empty());  // no file yet: no lines yet
+  std::ofstream out(path);
+  out << "{\"env_steps\": 1, \"a\": 10}\n{\"env_steps\": 2, \"a\": 20}\n{\"env_steps\": 3, \"a\""
+      << std::flush;
+  EXPECT_EQ(follower.update().at("a").second, (std::vector<double>{10, 20}));
+  // The line being written is read once its newline is there, and only the new part is parsed.
+  out << ": 30}\n" << std::flush;
+  EXPECT_EQ(follower.update().at("a").second, (std::vector<double>{10, 20, 30}));
+  EXPECT_EQ(follower.update().at("a").first, (std::vector<double>{1, 2, 3}));
+  // A corrupt complete line is an error naming its line, as read_metric_columns says.
+  out << "{oops\n{\"env_steps\": 5, \"a\": 50}\n" << std::flush;
+  EXPECT_NE(
+      testing::error_of<IoError>([&] { follower.update(); }).find("metrics.jsonl:4: not JSON"),
+      std::string::npos);
+  out.close();
+  // A new run in the same folder: a shorter file is read from its start.
+  std::ofstream(path) << "{\"env_steps\": 7, \"a\": 70}\n";
+  MetricsFollower again(path);
+  again.update();
+  std::ofstream(path) << "{\"env_steps\": 8, \"b\": 1}\n";
+  const auto& columns = again.update();
+  EXPECT_FALSE(columns.contains("a"));
+  EXPECT_EQ(columns.at("b").first, (std::vector<double>{8}));
+}
+
 TEST(PlotCompare, DrawsOneSeriesPerRunAndNamesARunWithoutTheMetric) {
   testing::TempDir dir;
   const auto write_run = [&](const std::string& name, double slope, bool with_metric) {

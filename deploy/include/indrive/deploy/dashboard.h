@@ -18,6 +18,7 @@
 #pragma once
 
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -50,6 +51,17 @@ struct DashboardStats {
   std::size_t pictures = 0;  // coverage and town maps shown
 };
 
+// What a page writer keeps between writes of the same runs' page (indrive launch, indrive
+// dashboard --watch): each write then parses only the metrics lines appended since the last.
+class DashboardCache {
+ public:
+  // The columns of a metrics.jsonl as they are now (a copy: the charts take them apart).
+  MetricColumns metrics(const std::filesystem::path& metrics_jsonl);
+
+ private:
+  std::map<std::filesystem::path, MetricsFollower> followers_;
+};
+
 // The charts' groups, in page order, and the group a metrics.jsonl key belongs to.
 const std::vector<std::string>& dashboard_chart_groups();
 std::string dashboard_chart_group(const std::string& metric);
@@ -57,11 +69,13 @@ std::string dashboard_chart_group(const std::string& metric);
 // Renders the page. `media_dir` is where transcoded videos go and `page_dir` the folder the page
 // will live in (video links are relative to it). Throws IoError naming the run when one of them
 // has none of metrics.jsonl, eval/ or config.yaml, or when a file is malformed.
+// `cache`: as above; null: every file is read whole.
 std::string render_dashboard(const DashboardInput& input, const std::filesystem::path& page_dir,
-                             DashboardStats* stats = nullptr);
+                             DashboardStats* stats = nullptr, DashboardCache* cache = nullptr);
 
 // Renders and writes the page atomically (a reader never sees half a page).
-DashboardStats write_dashboard(const DashboardInput& input, const std::filesystem::path& page);
+DashboardStats write_dashboard(const DashboardInput& input, const std::filesystem::path& page,
+                               DashboardCache* cache = nullptr);
 
 // Chart.js as shipped by libjs-chart.js, embedded at build time.
 std::string_view chartjs_source();

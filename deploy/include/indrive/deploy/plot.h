@@ -5,6 +5,7 @@
 //   plot.save("runs/x/plots/wm_loss.png");
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <nlohmann/json_fwd.hpp>
@@ -58,6 +59,27 @@ std::vector<double> nice_ticks(double low, double high, int count);
 using MetricColumns = std::map<std::string, std::pair<std::vector<double>, std::vector<double>>>;
 MetricColumns read_metric_columns(const std::filesystem::path& metrics_jsonl,
                                   const std::string& x_key = "env_steps");
+
+// A metrics.jsonl that a running process appends to, read again and again at the cost of what
+// was appended: each update() parses only the complete lines added since the last (a line still
+// being written waits for its newline). The same rules as read_metric_columns otherwise; a file
+// that shrank (a new run in the same folder) is read again from its start.
+class MetricsFollower {
+ public:
+  explicit MetricsFollower(std::filesystem::path metrics_jsonl, std::string x_key = "env_steps");
+  // Reads what was appended; a missing file is no error (no lines yet). Throws IoError for a
+  // corrupt line. With `final`, a last line without its newline is read too when it parses.
+  const MetricColumns& update(bool final = false);
+  const MetricColumns& columns() const { return columns_; }
+
+ private:
+  void add_line(const std::string& line, bool last_of_file);
+  std::filesystem::path path_;
+  std::string x_key_;
+  std::uintmax_t offset_ = 0;
+  int line_number_ = 0;
+  MetricColumns columns_;
+};
 
 // Writes one PNG per numeric key of metrics.jsonl (other than the x key) into `out_dir`,
 // against `x_key` (default env_steps). Returns the files written.
