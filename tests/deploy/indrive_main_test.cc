@@ -70,5 +70,43 @@ TEST(IndriveCompare, NothingToCompareOrABadGroupIsAnErrorThatSaysWhatToWrite) {
       << testing::slurp(missing_log);
 }
 
+TEST(IndriveDashboard, OneRunsPageGoesIntoTheRunAndItsFiguresArePrinted) {
+  testing::TempDir dir;
+  const auto run = write_run(dir.path() / "s0", 0.01);
+  const auto log = dir.path() / "dashboard.log";
+  testing::Child dashboard({kIndrive.string(), "dashboard", run.string()}, log);
+  ASSERT_EQ(dashboard.wait(30s), 0) << testing::slurp(log);
+  EXPECT_TRUE(std::filesystem::exists(run / "index.html"));
+  const std::string output = testing::slurp(log);
+  EXPECT_NE(output.find((run / "index.html").string() + ": 1 charts, 11 points"), std::string::npos)
+      << output;
+}
+
+TEST(IndriveDashboard, SeveralRunsNeedAPageNameAndAFolderThatIsNoRunIsNamed) {
+  testing::TempDir dir;
+  const auto a = write_run(dir.path() / "s0", 0.01).string();
+  const auto b = write_run(dir.path() / "s1", 0.03).string();
+  const auto log = dir.path() / "two.log";
+  testing::Child two({kIndrive.string(), "dashboard", a, b}, log);
+  EXPECT_NE(two.wait(30s), 0);
+  EXPECT_NE(testing::slurp(log).find("needs --out PAGE.html"), std::string::npos)
+      << testing::slurp(log);
+
+  const auto page = dir.path() / "both.html";
+  const auto group_log = dir.path() / "group.log";
+  testing::Child group(
+      {kIndrive.string(), "dashboard", "--group", "disag=" + a + "," + b, "--out", page.string()},
+      group_log);
+  EXPECT_EQ(group.wait(30s), 0) << testing::slurp(group_log);
+  EXPECT_NE(testing::slurp(page).find("disag (mean of 2, band min-max)"), std::string::npos);
+
+  std::filesystem::create_directories(dir.path() / "notarun");
+  const auto bad_log = dir.path() / "bad.log";
+  testing::Child bad({kIndrive.string(), "dashboard", (dir.path() / "notarun").string()}, bad_log);
+  EXPECT_NE(bad.wait(30s), 0);
+  EXPECT_NE(testing::slurp(bad_log).find("is it a run directory"), std::string::npos)
+      << testing::slurp(bad_log);
+}
+
 }  // namespace
 }  // namespace indrive

@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
+#include "child_process.h"
 #include "testing.h"
 
 namespace indrive::deploy {
@@ -50,6 +53,86 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
     EXPECT_EQ(spec.log_file.parent_path(), dir.path() / "smoke" / "logs") << spec.name;
   }
   EXPECT_TRUE(std::filesystem::is_directory(dir.path() / "smoke" / "logs"));
+}
+
+TEST(LaunchStatus, StatusJsonHasEveryProcessAndTheRunsState) {
+  testing::TempDir dir;
+  std::vector<ChildStatus> processes = {
+      {.name = "learner", .state = ChildState::kRunning, .pid = 42, .last_line = "steps 100"},
+      {.name = "actor-0",
+       .state = ChildState::kWaitingRestart,
+       .restarts = 2,
+       .last_exit_code = 134}};
+  write_status_json(dir.path(), processes, /*ended=*/false);
+  auto status = nlohmann::json::parse(testing::slurp(dir.path() / "status.json"));
+  EXPECT_EQ(status["state"], "running");
+  ASSERT_EQ(status["processes"].size(), 2u);
+  EXPECT_EQ(status["processes"][0]["name"], "learner");
+  EXPECT_EQ(status["processes"][0]["pid"], 42);
+  EXPECT_EQ(status["processes"][0]["last_line"], "steps 100");
+  EXPECT_EQ(status["processes"][1]["state"], child_state_name(ChildState::kWaitingRestart));
+  EXPECT_EQ(status["processes"][1]["restarts"], 2);
+  EXPECT_EQ(status["processes"][1]["last_exit_code"], 134);
+  write_status_json(dir.path(), processes, /*ended=*/true);
+  status = nlohmann::json::parse(testing::slurp(dir.path() / "status.json"));
+  EXPECT_EQ(status["state"], "ended");
+}
+
+// A launch of stand-in programs: a "learner" that logs three metrics lines and ends the run (a
+// clean exit; a failed one would be restarted), and an
+// "actor" that waits to be stopped. The run's page is refreshed while it runs and written a
+// last time with the learner's exit code.
+TEST(LaunchPage, TheRunsPageIsRefreshedWhileItRunsAndSaysHowItEnded) {
+  testing::TempDir dir;
+  const auto bin = dir.path() / "bin";
+  std::filesystem::create_directories(bin);
+  {
+    std::ofstream learner(bin / "indrive-learner");
+    learner << "#!/bin/sh\n"
+               "while [ \"$1\" != --run-dir ]; do shift; done; run=$2\n"
+               "for i in 1 2 3; do\n"
+               "  echo \"{\\\"env_steps\\\": $((i * 100)), \\\"wm/recon\\\": $i}\" >> "
+               "\"$run/metrics.jsonl\"\n"
+               "  echo \"steps $((i * 100))\"; sleep 0.3\n"
+               "done\n"
+               "cp \"$run/index.html\" \"$run/seen-while-running.html\"\n"
+               "exit 0\n";
+    std::ofstream actor(bin / "indrive-actor");
+    actor << "#!/bin/sh\nexec sleep 30\n";
+  }
+  std::filesystem::permissions(bin / "indrive-learner", std::filesystem::perms::owner_all);
+  std::filesystem::permissions(bin / "indrive-actor", std::filesystem::perms::owner_all);
+  std::ofstream(dir.path() / "config.yaml") << "preset: tiny\n";
+
+  LaunchOptions options{.config = dir.path() / "config.yaml",
+                        .runs_dir = dir.path() / "runs",
+                        .run_id = "paged",
+                        .actors = 1,
+                        .evaluators = 0,
+                        .bin_dir = bin,
+                        .status_interval_s = 60.0,
+                        .dashboard_interval_s = 0.2};
+  EXPECT_EQ(run_launch(options), 0);
+  const auto run = dir.path() / "runs" / "paged";
+  // What a browser saw meanwhile: a live page that reloads itself.
+  const std::string live = testing::slurp(run / "seen-while-running.html");
+  EXPECT_NE(live.find("<meta http-equiv=\"refresh\" content=\"1\">"), std::string::npos);
+  EXPECT_NE(live.find(">live<"), std::string::npos);
+  const std::string page = testing::slurp(run / "index.html");
+  EXPECT_NE(page.find("learner exit code 0"), std::string::npos);
+  EXPECT_EQ(page.find("http-equiv=\"refresh\""), std::string::npos);  // ended: no more reloads
+  EXPECT_NE(page.find("\"title\":\"wm/recon\""), std::string::npos);
+  EXPECT_NE(page.find("[1,2,3]"), std::string::npos) << "the three lines of wm/recon";
+  const auto status = nlohmann::json::parse(testing::slurp(run / "status.json"));
+  EXPECT_EQ(status["state"], "ended");
+  EXPECT_EQ(status["processes"][0]["last_line"], "steps 300");
+
+  // --dashboard-interval 0: neither file.
+  options.run_id = "unpaged";
+  options.dashboard_interval_s = 0.0;
+  EXPECT_EQ(run_launch(options), 0);
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "runs" / "unpaged" / "index.html"));
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "runs" / "unpaged" / "status.json"));
 }
 
 }  // namespace
