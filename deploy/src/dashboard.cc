@@ -101,14 +101,6 @@ void append_numbers(std::string& out, const std::vector<double>& values) {
   out += ']';
 }
 
-std::string local_time(std::time_t when) {
-  char text[32];
-  std::tm parts{};
-  localtime_r(&when, &parts);
-  std::strftime(text, sizeof(text), "%Y-%m-%d %H:%M:%S", &parts);
-  return text;
-}
-
 // The markdown of render_markdown (headings, paragraphs, pipe tables) as HTML.
 std::string markdown_to_html(const std::string& markdown) {
   std::ostringstream html;
@@ -212,13 +204,8 @@ std::vector<Chart> build_charts(const std::vector<CompareGroup>& groups, Dashboa
           keys[key].push_back(std::move(xy));
         }
       }
-      if (fs::is_directory(run / "eval")) {
-        for (const auto& entry : fs::directory_iterator(run / "eval")) {
-          const std::string name = entry.path().filename().string();
-          if (name.starts_with("curve-") && entry.path().extension() == ".csv") {
-            curve_files.push_back(entry.path());
-          }
-        }
+      for (auto& file : run_files(run / "eval", "curve-", ".csv")) {
+        curve_files.push_back(std::move(file));
       }
     }
     for (auto& [key, runs] : keys) {
@@ -246,7 +233,6 @@ std::vector<Chart> build_charts(const std::vector<CompareGroup>& groups, Dashboa
                                         << "; its runs are not drawn as one band";
       }
     }
-    std::sort(curve_files.begin(), curve_files.end());
     const EvalCurves curves = read_eval_curves(curve_files);
     for (const auto& [town, points] : curves) {
       Series sr{group.label + " " + town, colour, {}, {}, {}, {}};
@@ -318,6 +304,11 @@ std::string charts_json(const std::vector<Chart>& charts, std::size_t* points) {
     append_numbers(out, *xs[i]);
   }
   out += "]," + body + "}";
+  // Inside <script>, a "</" from a run's label or a metric's name would end the script: JSON
+  // allows "<\/" for it.
+  for (auto at = out.find("</"); at != std::string::npos; at = out.find("</", at + 3)) {
+    out.replace(at, 2, "<\\/");
+  }
   return out;
 }
 
@@ -522,6 +513,15 @@ constexpr const char* kScript = R"js(
 
 }  // namespace
 
+std::string local_time_now() {
+  char text[32];
+  const std::time_t now = std::time(nullptr);
+  std::tm parts{};
+  localtime_r(&now, &parts);
+  std::strftime(text, sizeof(text), "%Y-%m-%d %H:%M:%S", &parts);
+  return text;
+}
+
 MetricColumns DashboardCache::metrics(const fs::path& metrics_jsonl) {
   auto [it, inserted] = followers_.try_emplace(metrics_jsonl, metrics_jsonl);
   return it->second.update();
@@ -588,7 +588,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   }
   html << "<style>" << kStyle << "</style>\n<script>" << chartjs_source() << "</script>\n";
   html << "</head><body>\n<header><h1>" << escape_html(title) << "</h1><div class=\"state\">";
-  const std::string now = local_time(std::time(nullptr));
+  const std::string now = local_time_now();
   std::string ended = input.ended;
   if (ended.empty() && input.live_refresh_s <= 0 && all_runs.size() == 1 &&
       fs::exists(all_runs[0] / "status.json")) {
@@ -638,9 +638,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   try {
     const Report report = aggregate(load_results(all_runs));
     html << markdown_to_html(render_markdown(report, input.seen_town, input.heldout_town));
-  } catch (const CsvError&) {
-    html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
-  } catch (const std::invalid_argument&) {
+  } catch (const CsvError&) {  // load_results: no episode in any eval/*.csv yet
     html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
   }
   html << "</section>\n";
@@ -650,17 +648,8 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   html << "<section id=\"maps\"><h2>Coverage and town maps</h2>\n";
   for (const auto& group : input.runs) {
     for (const auto& run : group.runs) {
-      std::vector<fs::path> pngs;
-      if (fs::is_directory(run / "plots")) {
-        for (const auto& entry : fs::directory_iterator(run / "plots")) {
-          const std::string name = entry.path().filename().string();
-          if (entry.path().extension() == ".png" &&
-              (name.starts_with("coverage_map") || name.starts_with("town"))) {
-            pngs.push_back(entry.path());
-          }
-        }
-      }
-      std::sort(pngs.begin(), pngs.end());
+      std::vector<fs::path> pngs = run_files(run / "plots", "coverage_map", ".png");
+      for (auto& town : run_files(run / "plots", "town", ".png")) pngs.push_back(std::move(town));
       for (const auto& png : pngs) {
         html << "<figure><img alt=\"" << escape_html(png.filename().string())
              << "\" src=\"data:image/png;base64," << base64(read_text(png)) << "\"><figcaption>"
@@ -681,13 +670,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   html << "<section id=\"videos\"><h2>Evaluation videos</h2>\n";
   for (const auto& group : input.runs) {
     for (const auto& run : group.runs) {
-      std::vector<fs::path> files;
-      if (fs::is_directory(run / "videos")) {
-        for (const auto& entry : fs::directory_iterator(run / "videos")) {
-          if (entry.path().extension() == ".mp4") files.push_back(entry.path());
-        }
-      }
-      std::sort(files.begin(), files.end());
+      const std::vector<fs::path> files = run_files(run / "videos", "", ".mp4");
       const std::string run_name = run.lexically_normal().filename().string();
       for (std::size_t i = 0; i < files.size() && i < kMaxVideosPerRun; ++i) {
         const fs::path target =

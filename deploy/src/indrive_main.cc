@@ -29,6 +29,24 @@ fs::path own_folder() {
   return error ? fs::current_path() : self.parent_path();
 }
 
+// The runs of `indrive compare` and `indrive dashboard`: each positional run its own group, then
+// each --group LABEL=RUN[,RUN...], whose runs must be directories.
+std::vector<indrive::deploy::CompareGroup> run_groups(const std::vector<fs::path>& runs,
+                                                      const std::vector<std::string>& specs) {
+  std::vector<indrive::deploy::CompareGroup> groups;
+  for (const auto& run : runs) groups.push_back(indrive::deploy::single_run_group(run));
+  for (const auto& spec : specs) {
+    groups.push_back(indrive::deploy::parse_compare_group(spec));
+    for (const auto& run : groups.back().runs) {
+      if (!fs::is_directory(run)) {
+        throw std::invalid_argument("--group " + spec + ": " + run.string() +
+                                    " is not a directory");
+      }
+    }
+  }
+  return groups;
+}
+
 volatile sig_atomic_t g_stop = 0;
 void on_stop_signal(int) { g_stop = 1; }
 
@@ -208,18 +226,7 @@ int main(int argc, char** argv) {
       if (dashboard_runs.empty() && dashboard_groups.empty()) {
         throw std::invalid_argument("dashboard: name run directories or --group LABEL=RUN,RUN");
       }
-      for (const auto& run : dashboard_runs) {
-        dashboard.runs.push_back(indrive::deploy::single_run_group(run));
-      }
-      for (const auto& spec : dashboard_groups) {
-        dashboard.runs.push_back(indrive::deploy::parse_compare_group(spec));
-        for (const auto& run : dashboard.runs.back().runs) {
-          if (!fs::is_directory(run)) {
-            throw std::invalid_argument("--group " + spec + ": " + run.string() +
-                                        " is not a directory");
-          }
-        }
-      }
+      dashboard.runs = run_groups(dashboard_runs, dashboard_groups);
       if (dashboard_out.empty()) {
         if (dashboard_runs.size() != 1 || !dashboard_groups.empty()) {
           throw std::invalid_argument(
@@ -254,19 +261,7 @@ int main(int argc, char** argv) {
       if (compare_runs.empty() && compare_groups.empty()) {
         throw std::invalid_argument("compare: name run directories or --group LABEL=RUN,RUN");
       }
-      std::vector<indrive::deploy::CompareGroup> groups;
-      for (const auto& run : compare_runs) {
-        groups.push_back(indrive::deploy::single_run_group(run));
-      }
-      for (const auto& spec : compare_groups) {
-        groups.push_back(indrive::deploy::parse_compare_group(spec));
-        for (const auto& run : groups.back().runs) {
-          if (!fs::is_directory(run)) {
-            throw std::invalid_argument("--group " + spec + ": " + run.string() +
-                                        " is not a directory");
-          }
-        }
-      }
+      const auto groups = run_groups(compare_runs, compare_groups);
       const auto ends = indrive::deploy::plot_compare(groups, compare_metric, compare_out, plot_x,
                                                       compare_smoothing);
       std::printf("%s\n", compare_out.c_str());

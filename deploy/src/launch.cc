@@ -4,7 +4,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <ctime>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -39,15 +38,6 @@ std::vector<std::string> common_args(const LaunchOptions& options, const fs::pat
     args.insert(args.end(), {"--set", override_text});
   }
   return args;
-}
-
-std::string now_text() {
-  char text[32];
-  const std::time_t now = std::time(nullptr);
-  std::tm parts{};
-  localtime_r(&now, &parts);
-  std::strftime(text, sizeof(text), "%Y-%m-%d %H:%M:%S", &parts);
-  return text;
 }
 
 // The run's page, refreshed while it runs; a failure to write it is logged once and never
@@ -111,7 +101,7 @@ class PageRefresher {
 
 void write_status_json(const fs::path& run_dir, const std::vector<ChildStatus>& processes,
                        bool ended) {
-  nlohmann::json status = {{"written", now_text()},
+  nlohmann::json status = {{"written", local_time_now()},
                            {"state", ended ? "ended" : "running"},
                            {"processes", nlohmann::json::array()}};
   for (const auto& p : processes) {
@@ -229,7 +219,7 @@ int run_launch(const LaunchOptions& options) {
   }
   if (page.enabled()) {
     page.refresh(supervisor.status(), /*ended=*/true,
-                 "ended " + now_text() + ", learner exit code " + std::to_string(exit_code));
+                 "ended " + local_time_now() + ", learner exit code " + std::to_string(exit_code));
     std::printf("%-12s | %s\n", "launch", page.summary().c_str());
   }
   return exit_code;

@@ -531,20 +531,25 @@ EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files) {
   return curves;
 }
 
-std::vector<std::filesystem::path> plot_eval_curves(const std::filesystem::path& run_dir,
-                                                    const std::filesystem::path& out_dir) {
-  namespace fs = std::filesystem;
-  std::vector<fs::path> files;
-  if (fs::is_directory(run_dir / "eval")) {
-    for (const auto& entry : fs::directory_iterator(run_dir / "eval")) {
-      const std::string name = entry.path().filename().string();
-      if (name.starts_with("curve-") && entry.path().extension() == ".csv") {
-        files.push_back(entry.path());
-      }
+std::vector<std::filesystem::path> run_files(const std::filesystem::path& folder,
+                                             const std::string& prefix, const std::string& suffix) {
+  std::vector<std::filesystem::path> files;
+  if (!std::filesystem::is_directory(folder)) return files;
+  for (const auto& entry : std::filesystem::directory_iterator(folder)) {
+    const std::string name = entry.path().filename().string();
+    if (entry.is_regular_file() && name.starts_with(prefix) && name.ends_with(suffix) &&
+        name.size() >= prefix.size() + suffix.size()) {
+      files.push_back(entry.path());
     }
   }
   std::sort(files.begin(), files.end());
-  const EvalCurves curves = read_eval_curves(files);
+  return files;
+}
+
+std::vector<std::filesystem::path> plot_eval_curves(const std::filesystem::path& run_dir,
+                                                    const std::filesystem::path& out_dir) {
+  namespace fs = std::filesystem;
+  const EvalCurves curves = read_eval_curves(run_files(run_dir / "eval", "curve-", ".csv"));
   if (curves.empty()) return {};
   LinePlot success("evaluation success rate (continuous evaluator)", "env steps", "SR %");
   LinePlot completion("evaluation route completion (continuous evaluator)", "env steps",

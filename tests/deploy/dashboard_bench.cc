@@ -10,7 +10,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -89,9 +88,6 @@ int main(int argc, char** argv) {
       "  write, appended lines only (indrive launch, --watch): mean %.3f s, max %.3f s over %d\n",
       warm, warm_max, kWrites);
   std::printf("  refreshed every 30 s: %.2f%% of one core\n", 100.0 * warm / 30.0);
-  if (std::getenv("KEEP") == nullptr)
-    fs::remove_all(run);
-  else
-    std::printf("%s\n", run.c_str());
+  fs::remove_all(run);
   return 0;
 }

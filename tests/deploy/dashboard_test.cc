@@ -208,6 +208,15 @@ TEST(Dashboard, SeveralRunsAreOverlaidAndSeedGroupsAreAMeanWithABand) {
   }
 }
 
+TEST(Dashboard, ALabelThatWouldCloseTheScriptStaysData) {
+  testing::TempDir dir;
+  const fs::path run = write_run(dir.path() / "run", 3, 1.0);
+  const std::string html = render_dashboard({.runs = {{"x</script><b>", {run}}}}, dir.path());
+  const auto data = page_data(html);
+  EXPECT_EQ(find_chart(data, "wm/recon")->at("series")[0]["label"], "x</script><b>");
+  EXPECT_EQ(html.find("x</script>"), std::string::npos);
+}
+
 TEST(Dashboard, WhatIsNotARunIsAnErrorThatSaysWhatARunIs) {
   testing::TempDir dir;
   fs::create_directories(dir.path() / "empty");

@@ -77,6 +77,9 @@ std::string render_dashboard(const DashboardInput& input, const std::filesystem:
 DashboardStats write_dashboard(const DashboardInput& input, const std::filesystem::path& page,
                                DashboardCache* cache = nullptr);
 
+// "YYYY-MM-DD HH:MM:SS", local time: the stamps of the page and of <run>/status.json.
+std::string local_time_now();
+
 // Chart.js as shipped by libjs-chart.js, embedded at build time.
 std::string_view chartjs_source();
 

@@ -144,6 +144,11 @@ using EvalCurves = std::map<std::string, std::vector<EvalCurvePoint>>;  // town 
 // crashed evaluator) is skipped; any other malformed row throws IoError naming file and line.
 EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files);
 
+// The files of `folder` whose name starts with `prefix` and ends with `suffix`, sorted; none when
+// the folder does not exist. E.g. run_files(run / "eval", "curve-", ".csv").
+std::vector<std::filesystem::path> run_files(const std::filesystem::path& folder,
+                                             const std::string& prefix, const std::string& suffix);
+
 // Writes eval_success_rate.png and eval_route_completion.png (one series per town, against env
 // steps) into `out_dir` from <run>/eval/curve-*.csv. Returns the files written; none when the
 // run has no learning-curve files.
