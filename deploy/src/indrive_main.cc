@@ -1,10 +1,12 @@
 // `indrive`: the project's front door.
 //
 //   indrive launch --config deploy/configs/smoke.yaml --run-id smoke --actors 2 --evaluators 1
+#include <poll.h>
 #include <signal.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -50,9 +52,38 @@ std::vector<indrive::deploy::CompareGroup> run_groups(const std::vector<fs::path
 volatile sig_atomic_t g_stop = 0;
 void on_stop_signal(int) { g_stop = 1; }
 
+// The last line read from standard input until it ends (`--until-eof`); nullopt while it is
+// open. What the program feeding the page (the learner) says of how the run ended.
+class InputEnd {
+ public:
+  // Whether standard input has reached its end; waits up to `wait_ms` for it.
+  bool reached(int wait_ms) {
+    pollfd fd{.fd = STDIN_FILENO, .events = POLLIN, .revents = 0};
+    if (::poll(&fd, 1, wait_ms) <= 0) return false;
+    char buffer[4096];
+    const ssize_t n = ::read(STDIN_FILENO, buffer, sizeof buffer);
+    if (n < 0) return errno != EINTR && errno != EAGAIN;
+    if (n == 0) return true;
+    pending_.append(buffer, static_cast<std::size_t>(n));
+    for (std::size_t end; (end = pending_.find('\n')) != std::string::npos;) {
+      if (end > 0) last_line_ = pending_.substr(0, end);
+      pending_.erase(0, end + 1);
+    }
+    return false;
+  }
+  std::string last_line() const { return pending_.empty() ? last_line_ : pending_; }
+
+ private:
+  std::string pending_, last_line_;
+};
+
 // `indrive dashboard`: writes the page once, or with --watch every N seconds until SIGINT or
-// SIGTERM (for runs that no `indrive launch` supervises: docker-compose, several hosts).
-int run_dashboard(indrive::deploy::DashboardInput input, const fs::path& page, double watch_s) {
+// SIGTERM, or with --until-eof until standard input ends (the learner's page writer: the
+// learner writes how the run ended and closes the pipe, or dies and the pipe closes). For runs
+// that no `indrive launch` supervises: docker-compose, several hosts. A single run's coverage
+// map is redrawn before each write, as the launcher does.
+int run_dashboard(indrive::deploy::DashboardInput input, const fs::path& page, double watch_s,
+                  bool until_eof) {
   using indrive::deploy::write_dashboard;
   const auto print = [](const indrive::deploy::DashboardStats& stats) {
     std::printf("%s: %zu charts, %zu points, %zu maps, %zu videos, %.0f KB, written in %.2f s\n",
@@ -69,17 +100,46 @@ int run_dashboard(indrive::deploy::DashboardInput input, const fs::path& page, d
   sigemptyset(&action.sa_mask);
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
+  const bool one_run = input.runs.size() == 1 && input.runs[0].runs.size() == 1;
+  bool warned = false;
+  const auto redraw_coverage = [&] {
+    if (!one_run) return;
+    const fs::path run = input.runs[0].runs[0];
+    try {
+      indrive::deploy::plot_coverage(run, run / "plots" / "coverage_map.png");
+    } catch (const std::exception& error) {
+      if (!warned) std::fprintf(stderr, "the coverage map is not redrawn: %s\n", error.what());
+      warned = true;
+    }
+  };
+  const std::string ended_text = input.ended;
   input.live_refresh_s = watch_s;
+  input.ended.clear();
   indrive::deploy::DashboardCache cache;
-  while (g_stop == 0) {
+  InputEnd input_end;
+  bool eof = false;
+  while (g_stop == 0 && !eof) {
+    redraw_coverage();
     print(write_dashboard(input, page, &cache));
     const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(watch_s);
-    while (g_stop == 0 && std::chrono::steady_clock::now() < until) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    while (g_stop == 0 && !eof && std::chrono::steady_clock::now() < until) {
+      if (until_eof) {
+        eof = input_end.reached(100);
+      } else {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      }
     }
   }
   input.live_refresh_s = 0;
-  input.ended = "watch stopped";
+  if (eof) {
+    const std::string said = input_end.last_line();
+    input.ended = !said.empty() ? said
+                                : "ended without a last word from the program feeding this page "
+                                  "(the learner was killed or crashed?)";
+  } else {
+    input.ended = !ended_text.empty() ? ended_text : "watch stopped";
+  }
+  redraw_coverage();
   print(write_dashboard(input, page, &cache));
   return 0;
 }
@@ -206,6 +266,16 @@ int main(int argc, char** argv) {
                    "rewrite the page every this many seconds until stopped (Ctrl-C); the page "
                    "reloads itself meanwhile")
       ->check(CLI::Range(0.0, 86400.0));
+  bool dashboard_until_eof = false;
+  dashboard_cmd
+      ->add_flag("--until-eof", dashboard_until_eof,
+                 "with --watch: also stop when standard input ends, and end the page with the "
+                 "last line read from it (how the learner's page writer learns how the run "
+                 "ended)")
+      ->needs("--watch");
+  dashboard_cmd->add_option("--ended", dashboard.ended,
+                            "how the run ended, shown at the top of the page (a one-off write, or "
+                            "the last one of --watch)");
   dashboard_cmd->add_option("--seen-town", dashboard.seen_town, "training town for the gap")
       ->capture_default_str();
   dashboard_cmd->add_option("--heldout-town", dashboard.heldout_town, "held-out town for the gap")
@@ -235,7 +305,7 @@ int main(int argc, char** argv) {
         }
         dashboard_out = dashboard_runs[0] / "index.html";
       }
-      return run_dashboard(dashboard, dashboard_out, dashboard_watch);
+      return run_dashboard(dashboard, dashboard_out, dashboard_watch, dashboard_until_eof);
     }
     if (*plot_cmd) {
       const bool has_metrics = fs::exists(plot_run / "metrics.jsonl");

@@ -132,6 +132,9 @@ std::vector<ProcessSpec> launch_plan(const LaunchOptions& options) {
       .log_file = logs / "learner.log"};
   learner.argv = {(options.bin_dir / "indrive-learner").string()};
   learner.argv.insert(learner.argv.end(), args.begin(), args.end());
+  // The launcher writes the page itself (with every process's state): the learner's own page
+  // writer stays off, whatever the overrides say.
+  learner.argv.insert(learner.argv.end(), {"--set", "learner.dashboard_s=0"});
   plan.push_back(std::move(learner));
 
   for (int i = 0; i < options.actors; ++i) {

@@ -8,6 +8,8 @@
 #include <iomanip>
 #include <limits>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -572,6 +574,30 @@ std::vector<std::filesystem::path> plot_eval_curves(const std::filesystem::path&
   return written;
 }
 
+namespace {
+
+// A town and its lane segments, loaded once per process: the launcher and `indrive dashboard
+// --watch` redraw a run's coverage map every refresh, and loading the town is most of a redraw.
+struct SegmentedTown {
+  env::Town town;
+  std::unique_ptr<env::LaneSegments> segments;  // points into town.net: both live here
+};
+
+const SegmentedTown& segmented_town(const std::string& spec, double segment_m) {
+  static std::mutex mutex;
+  static std::map<std::pair<std::string, double>, std::unique_ptr<SegmentedTown>> towns;
+  std::lock_guard<std::mutex> lock(mutex);
+  auto& entry = towns[{spec, segment_m}];
+  if (!entry) {
+    auto loaded = std::make_unique<SegmentedTown>(SegmentedTown{env::load_town(spec), nullptr});
+    loaded->segments = std::make_unique<env::LaneSegments>(loaded->town.net, segment_m);
+    entry = std::move(loaded);
+  }
+  return *entry;
+}
+
+}  // namespace
+
 std::optional<std::filesystem::path> plot_coverage(const std::filesystem::path& run_dir,
                                                    const std::filesystem::path& png_path) {
   namespace fs = std::filesystem;
@@ -599,9 +625,10 @@ std::optional<std::filesystem::path> plot_coverage(const std::filesystem::path& 
       throw IoError(config_path.string() + " is not readable YAML: " + error.what());
     }
   }
-  const env::Town town = env::load_town(town_spec);
   const env::CoverageCounts counts = env::read_coverage_csv(files);
-  const env::LaneSegments segments(town.net, counts.segment_m);
+  const SegmentedTown& loaded = segmented_town(town_spec, counts.segment_m);
+  const env::Town& town = loaded.town;
+  const env::LaneSegments& segments = *loaded.segments;
   int visited = 0;
   for (std::size_t i = 0; i < counts.pieces.size(); ++i) {
     if (counts.visits[i] > 0 &&

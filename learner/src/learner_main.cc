@@ -2,9 +2,13 @@
 // docs/architecture.md, section 2. Prints one progress line per log interval.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <filesystem>
+#include <optional>
+#include <sstream>
 
 #include "indrive/basics/log.h"
 #include "indrive/learner/learner.h"
+#include "indrive/learner/page_writer.h"
 #include "indrive/service/process_cli.h"
 
 int main(int argc, char** argv) {
@@ -14,6 +18,9 @@ int main(int argc, char** argv) {
   indrive::service::add_service_options(app, options, log_level);
   CLI11_PARSE(app, argc, argv);
 
+  // The run's page, kept by a companion `indrive dashboard` beside this program; it outlives
+  // the learner object so that it can say how the run ended, even when the learner throws.
+  std::optional<indrive::learner::PageWriter> page;
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     const auto& stop = indrive::service::install_stop_signals();
@@ -22,14 +29,29 @@ int main(int argc, char** argv) {
       std::printf("%s\n", indrive::service::check_summary(config, "learner").c_str());
       return 0;
     }
+    if (const double every_s = config.config().get<double>("learner.dashboard_s"); every_s > 0) {
+      std::error_code error;
+      const auto self = std::filesystem::read_symlink("/proc/self/exe", error);
+      page.emplace(self.parent_path() / "indrive", config.run_dir(), every_s);
+    }
     indrive::learner::Learner learner(config);
     learner.on_progress([](const std::string& line) {
       std::printf("%s\n", line.c_str());
       std::fflush(stdout);
     });
-    return learner.run(stop);
+    const int code = learner.run(stop);
+    if (page) {
+      const auto& counters = learner.stats().counters;
+      std::ostringstream ended;
+      ended << "ended: " << (stop.load() ? "stopped by a signal" : "budget reached") << " at "
+            << counters.env_steps << " env steps and " << counters.updates
+            << " updates, learner exit code " << code;
+      page->finish(ended.str());
+    }
+    return code;
   } catch (const std::exception& error) {
     INDRIVE_LOG(kError, "learner") << "indrive-learner failed: " << error.what();
+    if (page) page->finish(std::string("ended: the learner failed: ") + error.what());
     return 1;
   }
 }

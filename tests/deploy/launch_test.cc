@@ -31,6 +31,10 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
   EXPECT_EQ(plan[0].restart, RestartPolicy::kOnFailure);  // resumes from its checkpoint
   EXPECT_GT(plan[0].backoff.max_restarts, 0);
   EXPECT_EQ(plan[0].argv[0], "/opt/indrive/bin/indrive-learner");
+  // The launcher writes the run's page: the learner's own page writer stays off, last word.
+  ASSERT_GE(plan[0].argv.size(), 2u);
+  EXPECT_EQ(plan[0].argv[plan[0].argv.size() - 2], "--set");
+  EXPECT_EQ(plan[0].argv.back(), "learner.dashboard_s=0");
   EXPECT_EQ(plan[1].name, "actor-0");
   EXPECT_EQ(plan[2].name, "actor-1");
   EXPECT_EQ(plan[2].restart, RestartPolicy::kOnFailure);

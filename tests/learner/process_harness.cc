@@ -215,6 +215,7 @@ learner:
   log_interval_s: 1
   announce_s: 0.5
   allowance_slack: 16
+  dashboard_s: 0
 )";
 }
 

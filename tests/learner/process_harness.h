@@ -114,8 +114,8 @@ class ProcessWatch {
 
 // The YAML of the tiny-preset service runs of these tests: 16-step chunks, a 128-step prefill,
 // replay ratio 4 (one update per 32 env steps, so that a loaded machine still trains often
-// enough), a snapshot every 2 updates, metrics every second, fast announces and re-requests. Tests
-// change single keys with --set.
+// enough), a snapshot every 2 updates, metrics every second, fast announces and re-requests, no
+// page writer (page_writer_test and service_test cover it). Tests change single keys with --set.
 std::string tiny_service_config();
 
 // Command line of a service executable (indrive-learner or indrive-actor) of a test run.

@@ -285,6 +285,15 @@ TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExi
   EXPECT_GE(metrics["episode_reach_last20"].get<double>(), 1.0) << metrics.dump();
   EXPECT_GT(metrics["episode_length_last20"].get<double>(), 0.0) << metrics.dump();
   EXPECT_LE(metrics["episode_length_last20"].get<double>(), 151.0) << metrics.dump();
+
+  // A learner started without `indrive launch` keeps the run's page (learner.dashboard_s, 30 s
+  // by default) and ends it with how the run ended.
+  const std::string page = slurp(run_dir_ / "index.html");
+  EXPECT_NE(page.find("<span class=\"ended\">ended: budget reached at "), std::string::npos)
+      << slurp(run_dir_ / "logs" / "dashboard.log");
+  EXPECT_NE(slurp(dir_.path() / "learner.log").find("page: " + (run_dir_ / "index.html").string()),
+            std::string::npos)
+      << logs();
 }
 
 // --check-config checks each program's DDS Security files before anything starts: a good

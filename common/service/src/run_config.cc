@@ -114,7 +114,12 @@ void declare_service_schema(config::Schema& schema) {
       .add_float("learner.checkpoint_minutes", 5.0, "minutes between checkpoints", 0.01)
       .add_int("learner.checkpoint_keep", 3, "checkpoints kept", 1)
       .add_string("learner.init_checkpoint", "",
-                  "checkpoint of a pretraining run to start finetuning from");
+                  "checkpoint of a pretraining run to start finetuning from")
+      .add_float("learner.dashboard_s", 30.0,
+                 "seconds between rewrites of the run's page, <run>/index.html, by an `indrive "
+                 "dashboard` process the learner starts beside itself (0: none; `indrive launch` "
+                 "sets 0 and writes the page itself)",
+                 0.0);
   schema.add_string("eval.towns", "town01,town02", "towns of the evaluation grid, comma-separated")
       .add_string("eval.routes", "straight,right_loop,left_loop,two_turn",
                   "routes of the evaluation grid, comma-separated")
