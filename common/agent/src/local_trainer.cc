@@ -30,10 +30,12 @@ LocalTrainer::LocalTrainer(const AgentConfig& config, Environment& env, LocalTra
 void LocalTrainer::refresh_policy() { policy_.load_snapshot(agent_.snapshot()); }
 
 void LocalTrainer::run(std::int64_t env_steps,
-                       const std::function<void(const TrainMetrics&)>& on_metrics) {
+                       const std::function<void(const TrainMetrics&)>& on_metrics,
+                       const std::atomic<bool>* stop) {
   const bool keep_rewards = config_.phase != Phase::kPretrain;
   const double per_update = static_cast<double>(config_.replay.batch) * config_.replay.length;
-  for (std::int64_t i = 0; i < env_steps; ++i) {
+  const auto stopped = [stop] { return stop != nullptr && stop->load(); };
+  for (std::int64_t i = 0; i < env_steps && !stopped(); ++i) {
     if (need_reset_) {
       current_ = env_.reset();
       need_reset_ = false;
@@ -64,9 +66,10 @@ void LocalTrainer::run(std::int64_t env_steps,
       first_ = false;
     }
     // Train while the replayed/env ratio is below the target.
-    while (!prefill && replay_.num_windows(config_.replay.length) > 0 &&
-           (counters_.updates + 1) * per_update <=
-               options_.train_ratio * static_cast<double>(counters_.env_steps)) {
+    while (!prefill && !stopped() && replay_.num_windows(config_.replay.length) > 0 &&
+           static_cast<double>(earlier_updates_ + counters_.updates + 1) * per_update <=
+               options_.train_ratio *
+                   static_cast<double>(earlier_env_steps_ + counters_.env_steps)) {
       const TrainMetrics metrics =
           agent_.train_step(replay_.sample(config_.replay.batch, config_.replay.length));
       ++counters_.updates;

@@ -75,10 +75,11 @@ void with_staged_agent(const fs::path& folder, const std::vector<std::uint8_t>& 
 // The agent bytes of a checkpoint file: a learner checkpoint (counters + agent) or a bare agent
 // checkpoint. Returns the counters (zero for a bare one).
 learner::LearnerCounters read_checkpoint(const fs::path& path,
-                                         std::vector<std::uint8_t>& agent_bytes) {
+                                         std::vector<std::uint8_t>& agent_bytes,
+                                         std::vector<std::uint8_t>* replay_bytes = nullptr) {
   const auto bytes = read_file(path);
   try {
-    return learner::unpack_checkpoint(bytes, agent_bytes);
+    return learner::unpack_checkpoint(bytes, agent_bytes, replay_bytes);
   } catch (const learner::CheckpointError&) {
     agent_bytes = bytes;
     return {};
@@ -151,12 +152,21 @@ struct LocalRun::Impl {
   void resume() {
     std::vector<std::uint8_t> agent_bytes;
     if (const auto newest = checkpoints.newest()) {
-      base = read_checkpoint(*newest, agent_bytes);
+      std::vector<std::uint8_t> replay_bytes;
+      base = read_checkpoint(*newest, agent_bytes, &replay_bytes);
       with_staged_agent(run.checkpoints(), agent_bytes,
                         [this](const fs::path& dir) { trainer.load(dir); });
+      // The replay goes on where it stopped: no second random prefill in the middle of a run.
+      if (!replay_bytes.empty()) {
+        trainer.replay().load(replay_bytes, newest->string() + " (replay)");
+      }
       restore_coverage();
+      // The ratio is kept over the whole run: what a session stopped during a catch-up still
+      // owed is trained first. The random baseline never trains.
+      if (!random) trainer.continue_from(base.env_steps, base.updates);
       INDRIVE_LOG(kInfo, "local") << "resumed from " << newest->string() << " at " << base.env_steps
-                                  << " env steps, " << base.updates << " updates";
+                                  << " env steps, " << base.updates << " updates, "
+                                  << trainer.replay().size() << " replay steps";
     } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
                !init.empty()) {
       if (!fs::exists(init)) {
@@ -198,11 +208,17 @@ struct LocalRun::Impl {
     trainer.agent().save_checkpoint(staging);
     const auto agent_bytes = read_file(staging);
     fs::remove(staging);
-    const fs::path path = checkpoints.save(static_cast<std::uint64_t>(counters.updates),
-                                           learner::pack_checkpoint(counters, agent_bytes));
+    // With the replay, as the learner's: a resumed run trains on the data it had (the random
+    // baseline never trains, so its replay is not kept).
+    const std::vector<std::uint8_t> replay_bytes =
+        random ? std::vector<std::uint8_t>{} : trainer.replay().to_bytes();
+    const fs::path path =
+        checkpoints.save(static_cast<std::uint64_t>(counters.updates),
+                         learner::pack_checkpoint(counters, agent_bytes, replay_bytes));
     last_checkpoint = Clock::now();
     INDRIVE_LOG(kInfo, "local") << "checkpoint " << path.filename().string() << " ("
-                                << agent_bytes.size() << " bytes)";
+                                << agent_bytes.size() << " bytes of agent, " << replay_bytes.size()
+                                << " of replay before compression)";
   }
 
   void on_update(const agent::TrainMetrics& step) {
@@ -282,7 +298,7 @@ struct LocalRun::Impl {
     while (!stop.load() && (budget <= 0 || env_steps() < budget)) {
       // Small slices keep the stop signal, logging and checkpoints responsive.
       const std::int64_t slice = budget > 0 ? std::min<std::int64_t>(16, budget - env_steps()) : 16;
-      trainer.run(slice, on_metrics);
+      trainer.run(slice, on_metrics, &stop);
       if (interval.due(progress_now(), log_interval_s, log_every_steps)) log_metrics();
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
     }

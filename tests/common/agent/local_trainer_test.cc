@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 
 #include "dot_env.h"
@@ -86,6 +87,33 @@ TEST(LocalTrainer, ResumesFromItsCheckpointFolder) {
   EXPECT_EQ(b.replay().size(), a.replay().size());
   // Corrupt folder contents are reported, not crashed on.
   EXPECT_THROW(b.load(dir.path() / "missing"), AgentError);
+}
+
+// A stop request is honoured between two updates: the catch-up after the prefill (10 updates
+// owed at once here) does not hold a SIGTERM for its whole length. The updates still owed are
+// trained by the next call.
+TEST(LocalTrainer, StopsBetweenUpdatesAndTrainsWhatIsOwedLater) {
+  nn::set_threads(1);
+  DotEnvironment env(4);
+  LocalTrainer trainer(loop_config(Phase::kPretrain), env, {.train_ratio = 8});
+  std::atomic<bool> stop{false};
+  trainer.run(
+      100, [&](const TrainMetrics&) { stop = true; }, &stop);
+  // Prefill 40, then the 41st step owes 41 * 8 / 32 = 10 updates; the first one stops it.
+  EXPECT_EQ(trainer.counters().env_steps, 41);
+  EXPECT_EQ(trainer.counters().updates, 1);
+  stop = false;
+  trainer.run(1, nullptr, &stop);
+  EXPECT_EQ(trainer.counters().env_steps, 42);
+  EXPECT_EQ(trainer.counters().updates, 42 * 8 / 32);
+
+  // A resumed run's trainer keeps the ratio over the whole run: what an earlier session (41
+  // steps, 1 update) still owed is trained with this session's once its prefill is done.
+  DotEnvironment env2(4);
+  LocalTrainer resumed(loop_config(Phase::kPretrain), env2, {.train_ratio = 8});
+  resumed.continue_from(41, 1);
+  resumed.run(41);
+  EXPECT_EQ(resumed.counters().updates, (41 + 41) * 8 / 32 - 1);
 }
 
 }  // namespace

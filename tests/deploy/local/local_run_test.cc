@@ -187,16 +187,18 @@ TEST(LocalRunSmokeTest, PretrainWithDisagResumesAndFinetunesLaneFollowing) {
     LocalRun again(config);
     EXPECT_TRUE(bitwise_equal(parameters(again.agent().groups()), saved));
   }
-  // Training continues the counters (the replay is not checkpointed, so a short prefill
-  // refills it first).
+  // Training continues the counters and the replay: the checkpoint holds the replay, so the
+  // resumed run trains from its first step (no second prefill) and the whole run keeps the
+  // replay ratio, 16 replayed steps per env step, to the update.
   {
     const auto config =
-        make_config(pre_dir, {"run.budget_env_steps=" + std::to_string(kPretrainSteps + 300),
-                              "agent.replay.prefill=100"});
+        make_config(pre_dir, {"run.budget_env_steps=" + std::to_string(kPretrainSteps + 300)});
     LocalRun resumed(config);
     std::atomic<bool> stop{false};
     resumed.train(stop);
     EXPECT_EQ(resumed.env_steps(), kPretrainSteps + 300);
+    const auto& replay = config.agent().replay;
+    EXPECT_EQ(resumed.updates(), (kPretrainSteps + 300) * 16 / (replay.batch * replay.length));
     EXPECT_GT(resumed.updates(), saved_updates);
     const auto lines = read_metrics(pre_dir);
     ASSERT_FALSE(lines.empty());

@@ -8,6 +8,7 @@
 //   trainer.save(run_dir / "checkpoints");
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -58,9 +59,19 @@ class LocalTrainer {
   // The environment must outlive the trainer. The replay keeps rewards only in task phases.
   LocalTrainer(const AgentConfig& config, Environment& env, LocalTrainerOptions options = {});
   // Takes `env_steps` environment steps (random during prefill, the policy afterwards) and
-  // trains whenever the replay ratio allows; calls on_metrics after each update.
+  // trains whenever the replay ratio allows; calls on_metrics after each update. Returns early,
+  // between two updates or steps, once `stop` is set: the updates still owed (the catch-up after
+  // the prefill is dozens) are trained by the next call, or after a resume.
   void run(std::int64_t env_steps,
-           const std::function<void(const TrainMetrics&)>& on_metrics = nullptr);
+           const std::function<void(const TrainMetrics&)>& on_metrics = nullptr,
+           const std::atomic<bool>* stop = nullptr);
+  // The env steps and updates of a resumed run's earlier sessions: the replay ratio is then kept
+  // over the whole run, so updates a session still owed when it stopped (during a catch-up, for
+  // one) are trained as soon as the replay allows. counters() stay this session's.
+  void continue_from(std::int64_t env_steps, std::int64_t updates) {
+    earlier_env_steps_ = env_steps;
+    earlier_updates_ = updates;
+  }
   // Writes agent.ckpt and replay.bin into `dir` (created if missing).
   void save(const std::filesystem::path& dir) const;
   // Restores agent.ckpt (and replay.bin when present and of this phase's reward mode).
@@ -76,6 +87,7 @@ class LocalTrainer {
   AgentConfig config_;
   Environment& env_;
   LocalTrainerOptions options_;
+  std::int64_t earlier_env_steps_ = 0, earlier_updates_ = 0;  // continue_from()
   Agent agent_;
   ReplayBuffer replay_;
   Policy policy_;
