@@ -66,9 +66,4 @@ void EvaluationTally::write_new(nlohmann::json& record) {
   }
 }
 
-std::uint64_t EvaluationTally::results() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return results_;
-}
-
 }  // namespace indrive::learner

@@ -1,12 +1,7 @@
 #include "indrive/learner/learner.h"
 
 #include <algorithm>
-#include <cctype>
 #include <chrono>
-#include <cstdio>
-#include <cstring>
-#include <deque>
-#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>

@@ -1,6 +1,7 @@
 #include "indrive/service/training_metrics.h"
 
 #include <algorithm>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "indrive/basics/run_dir.h"

@@ -30,7 +30,6 @@ class EvaluationTally {
   void add(const msg::EpisodeResult& result);
   // Adds the fields above to `record` when a result arrived since the previous call.
   void write_new(nlohmann::json& record);
-  std::uint64_t results() const;
 
   // A town as part of a metrics key: letters, digits and '_' only ("maps/x.xodr" -> "maps_x_xodr").
   static std::string key_of(const std::string& town);
