@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -62,6 +63,15 @@ int unique_domain_id() {
 
 std::filesystem::path source_path(const std::string& relative) {
   return std::filesystem::path(INDRIVE_SOURCE_DIR) / relative;
+}
+
+std::vector<std::filesystem::path> shipped_configs() {
+  std::vector<std::filesystem::path> configs;
+  for (const auto& entry : std::filesystem::directory_iterator(source_path("deploy/configs"))) {
+    if (entry.path().extension() == ".yaml") configs.push_back(entry.path());
+  }
+  std::sort(configs.begin(), configs.end());
+  return configs;
 }
 
 int run_command(const std::string& command, std::string& output) {

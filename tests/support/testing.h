@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace indrive::testing {
 
@@ -25,6 +26,10 @@ int unique_domain_id();
 
 // Absolute path of a file in the source tree, e.g. source_path("deploy/dds/single_host.xml").
 std::filesystem::path source_path(const std::string& relative);
+
+// Every configuration the project ships (deploy/configs/*.yaml), sorted: the tests that check
+// each recipe still resolves and still gives an environment.
+std::vector<std::filesystem::path> shipped_configs();
 
 // Runs a shell command line; returns its exit status (-1 when it did not exit normally) and
 // puts what it wrote to stdout and stderr in `output`.
