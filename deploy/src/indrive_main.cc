@@ -49,6 +49,19 @@ std::vector<indrive::deploy::CompareGroup> run_groups(const std::vector<fs::path
   return groups;
 }
 
+// The runs of a subcommand that draws several: positional run directories, each its own line,
+// and repeatable --group LABEL=RUN[,RUN...] drawn as their mean with a min-max band. run_groups()
+// turns them into groups once parsed.
+void add_run_options(CLI::App* command, std::vector<fs::path>& runs,
+                     std::vector<std::string>& groups, const std::string& group_help) {
+  command->add_option("runs", runs, "run directories, each its own line")
+      ->check(CLI::ExistingDirectory);
+  command->add_option("--group", groups, "LABEL=RUN[,RUN...]: " + group_help + "; repeatable")
+      ->expected(1)
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+}
+
 volatile sig_atomic_t g_stop = 0;
 void on_stop_signal(int) { g_stop = 1; }
 
@@ -219,15 +232,9 @@ int main(int argc, char** argv) {
       "compare",
       "draw one metric of several runs (metrics.jsonl) into one PNG, a line per run or per "
       "group of runs");
-  compare_cmd->add_option("runs", compare_runs, "run directories, each its own line")
-      ->check(CLI::ExistingDirectory);
-  compare_cmd
-      ->add_option("--group", compare_groups,
-                   "LABEL=RUN[,RUN...]: runs drawn as one line, their mean, with a band from the "
-                   "lowest to the highest (e.g. the seeds of one method); repeatable")
-      ->expected(1)
-      ->allow_extra_args(false)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  add_run_options(compare_cmd, compare_runs, compare_groups,
+                  "runs drawn as one line, their mean, with a band from the lowest to the "
+                  "highest (e.g. the seeds of one method)");
   compare_cmd->add_option("--metric", compare_metric, "metrics.jsonl key, e.g. wm/recon")
       ->required();
   compare_cmd->add_option("--out", compare_out, "PNG to write")->capture_default_str();
@@ -248,15 +255,8 @@ int main(int argc, char** argv) {
       "dashboard",
       "write one self-contained HTML page (index.html) with the curves, tables, maps, videos, "
       "config and process states of one run or several, overlaid");
-  dashboard_cmd->add_option("runs", dashboard_runs, "run directories, each its own line")
-      ->check(CLI::ExistingDirectory);
-  dashboard_cmd
-      ->add_option("--group", dashboard_groups,
-                   "LABEL=RUN[,RUN...]: runs drawn as their mean with a min-max band (the seeds "
-                   "of one method); repeatable")
-      ->expected(1)
-      ->allow_extra_args(false)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  add_run_options(dashboard_cmd, dashboard_runs, dashboard_groups,
+                  "runs drawn as their mean with a min-max band (the seeds of one method)");
   dashboard_cmd->add_option(
       "--out", dashboard_out,
       "page to write (default: RUN/index.html for one run; required for several)");
