@@ -13,6 +13,7 @@
 #include <string>
 #include <thread>
 
+#include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
 #include "indrive/deploy/dashboard.h"
@@ -25,12 +26,6 @@ namespace fs = std::filesystem;
 namespace {
 
 // The folder of this executable: its sibling programs live there (build/bin).
-fs::path own_folder() {
-  std::error_code error;
-  const fs::path self = fs::read_symlink("/proc/self/exe", error);
-  return error ? fs::current_path() : self.parent_path();
-}
-
 // The runs of `indrive compare` and `indrive dashboard`: each positional run its own group, then
 // each --group LABEL=RUN[,RUN...], whose runs must be directories.
 std::vector<indrive::deploy::CompareGroup> run_groups(const std::vector<fs::path>& runs,
@@ -285,7 +280,7 @@ int main(int argc, char** argv) {
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     if (*launch_cmd) {
-      launch.bin_dir = own_folder();
+      launch.bin_dir = indrive::own_program_folder();
       // The learner and the actors share the cores: spinning OpenMP threads would take them
       // from each other (the service benchmark measured a 17x slower learner on 2 cores).
       // Set before the children start, as OpenMP reads it once at load; a user's value wins.

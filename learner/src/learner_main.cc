@@ -2,10 +2,10 @@
 // docs/architecture.md, section 2. Prints one progress line per log interval.
 #include <CLI/CLI.hpp>
 #include <cstdio>
-#include <filesystem>
 #include <optional>
 #include <sstream>
 
+#include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
 #include "indrive/learner/learner.h"
 #include "indrive/learner/page_writer.h"
@@ -30,9 +30,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (const double every_s = config.config().get<double>("learner.dashboard_s"); every_s > 0) {
-      std::error_code error;
-      const auto self = std::filesystem::read_symlink("/proc/self/exe", error);
-      page.emplace(self.parent_path() / "indrive", config.run_dir(), every_s);
+      page.emplace(indrive::own_program_folder() / "indrive", config.run_dir(), every_s);
     }
     indrive::learner::Learner learner(config);
     learner.on_progress([](const std::string& line) {

@@ -55,4 +55,10 @@ fs::path find_data(const fs::path& relative, const DataSearch& search) {
 
 fs::path find_data(const fs::path& relative) { return find_data(relative, process_data_search()); }
 
+fs::path own_program_folder() {
+  std::error_code error;
+  const fs::path self = fs::read_symlink("/proc/self/exe", error);
+  return error ? fs::current_path() : self.parent_path();
+}
+
 }  // namespace indrive

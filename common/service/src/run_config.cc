@@ -117,8 +117,8 @@ void declare_service_schema(config::Schema& schema) {
                   "checkpoint of a pretraining run to start finetuning from")
       .add_float("learner.dashboard_s", 30.0,
                  "seconds between rewrites of the run's page, <run>/index.html, by an `indrive "
-                 "dashboard` process the learner starts beside itself (0: none; `indrive launch` "
-                 "sets 0 and writes the page itself)",
+                 "dashboard` process the learner (or indrive-train-local) starts beside itself "
+                 "(0: none; `indrive launch` sets 0 and writes the page itself)",
                  0.0);
   schema.add_string("eval.towns", "town01,town02", "towns of the evaluation grid, comma-separated")
       .add_string("eval.routes", "straight,right_loop,left_loop,two_turn",

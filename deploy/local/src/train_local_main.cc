@@ -10,9 +10,13 @@
 // SIGINT / SIGTERM save a checkpoint and exit; running again resumes from it.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <optional>
+#include <sstream>
 
 #include "indrive/actor/env_adapter.h"
+#include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
+#include "indrive/learner/page_writer.h"
 #include "indrive/local/local_run.h"
 #include "indrive/service/process_cli.h"
 
@@ -35,6 +39,9 @@ int main(int argc, char** argv) {
                  "route(s) to evaluate on, comma-separated (and to train on: sets env.route)");
   CLI11_PARSE(app, argc, argv);
 
+  // The run's page, as the learner keeps it (learner.dashboard_s): a companion `indrive
+  // dashboard` told how the training ended.
+  std::optional<indrive::learner::PageWriter> page;
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     if (random) options.overrides.push_back("local.random=true");
@@ -61,6 +68,9 @@ int main(int argc, char** argv) {
       }
       return 0;
     }
+    if (const double every_s = config.config().get<double>("learner.dashboard_s"); every_s > 0) {
+      page.emplace(indrive::own_program_folder() / "indrive", config.run_dir(), every_s);
+    }
     indrive::local::LocalRun run(config);
     run.on_progress([](const std::string& line) {
       std::puts(line.c_str());
@@ -73,9 +83,17 @@ int main(int argc, char** argv) {
         config.run_id().c_str(), static_cast<long long>(run.env_steps()),
         static_cast<long long>(run.updates()), run.coverage().distinct_per_window(),
         100.0 * run.coverage().fraction_visited());
+    if (page) {
+      std::ostringstream ended;
+      ended << "ended: " << (stop.load() ? "stopped by a signal" : "budget reached") << " at "
+            << run.env_steps() << " env steps and " << run.updates()
+            << " updates, indrive-train-local exit code 0";
+      page->finish(ended.str());
+    }
     return 0;
   } catch (const std::exception& error) {
     INDRIVE_LOG(kError, "local") << "indrive-train-local failed: " << error.what();
+    if (page) page->finish(std::string("ended: indrive-train-local failed: ") + error.what());
     return 1;
   }
 }

@@ -81,6 +81,11 @@ TEST(TrainLocalMainTest, SigtermCheckpointsAndTheNextStartResumesAndEvaluates) {
   EXPECT_TRUE(fs::exists(run_dir / "coverage.csv"));
   EXPECT_TRUE(fs::exists(run_dir / "config.yaml"));
   const auto stopped_at = last_metrics(run_dir)["env_steps"].get<std::int64_t>();
+  // Its page (learner.dashboard_s, 30 s by default) says how it ended.
+  EXPECT_NE(testing::slurp(run_dir / "index.html")
+                .find("<span class=\"ended\">ended: stopped by a signal at "),
+            std::string::npos)
+      << testing::slurp(run_dir / "logs" / "dashboard.log");
 
   // A second start resumes at the saved counters and runs to a budget beyond them.
   const std::int64_t budget = stopped_at + 40;
@@ -91,6 +96,9 @@ TEST(TrainLocalMainTest, SigtermCheckpointsAndTheNextStartResumesAndEvaluates) {
   EXPECT_NE(testing::slurp(dir.path() / "resume.log").find("resumed from"), std::string::npos);
   EXPECT_EQ(last_metrics(run_dir)["env_steps"].get<std::int64_t>(), budget);
   EXPECT_EQ(last_metrics(run_dir)["learner_epoch"].get<std::int64_t>(), 2);
+  EXPECT_NE(testing::slurp(run_dir / "index.html")
+                .find("ended: budget reached at " + std::to_string(budget) + " env steps"),
+            std::string::npos);
 
   // Evaluation of the newest checkpoint: one episode on the straight route, one CSV row (a
   // short step budget: the route at 20 m/s).

@@ -47,4 +47,8 @@ std::filesystem::path find_data(const std::filesystem::path& relative, const Dat
 // find_data with this process's lookup inputs.
 std::filesystem::path find_data(const std::filesystem::path& relative);
 
+// The folder of the running executable (where the project's other programs are installed and
+// built beside it); the current folder when /proc/self/exe cannot be read.
+std::filesystem::path own_program_folder();
+
 }  // namespace indrive
