@@ -3,7 +3,6 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <optional>
-#include <sstream>
 
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
@@ -40,11 +39,8 @@ int main(int argc, char** argv) {
     const int code = learner.run(stop);
     if (page) {
       const auto& counters = learner.stats().counters;
-      std::ostringstream ended;
-      ended << "ended: " << (stop.load() ? "stopped by a signal" : "budget reached") << " at "
-            << counters.env_steps << " env steps and " << counters.updates
-            << " updates, learner exit code " << code;
-      page->finish(ended.str());
+      page->finish(indrive::learner::training_ended(stop.load(), counters.env_steps,
+                                                    counters.updates, "learner", code));
     }
     return code;
   } catch (const std::exception& error) {

@@ -132,4 +132,12 @@ bool PageWriter::finish(const std::string& how_it_ended, double wait_s) {
   return ok;
 }
 
+std::string training_ended(bool stopped, std::int64_t env_steps, std::int64_t updates,
+                           const std::string& program, int exit_code) {
+  std::ostringstream text;
+  text << "ended: " << (stopped ? "stopped by a signal" : "budget reached") << " at " << env_steps
+       << " env steps and " << updates << " updates, " << program << " exit code " << exit_code;
+  return text.str();
+}
+
 }  // namespace indrive::learner

@@ -78,6 +78,14 @@ TEST(PageWriterTest, StartsTheDashboardWatchAndHandsItTheLastWordsThroughThePipe
   EXPECT_FALSE(writer.finish("again")) << "only the first call counts";
 }
 
+TEST(PageWriterTest, TrainingEndedSaysHowFarTheRunGotAndWhy) {
+  EXPECT_EQ(training_ended(false, 400, 100, "learner", 0),
+            "ended: budget reached at 400 env steps and 100 updates, learner exit code 0");
+  EXPECT_EQ(training_ended(true, 12, 0, "indrive-train-local", 1),
+            "ended: stopped by a signal at 12 env steps and 0 updates, indrive-train-local exit "
+            "code 1");
+}
+
 TEST(PageWriterTest, AWriterThatFailsIsReportedAndAMissingOneLeavesThePageOff) {
   testing::TempDir dir;
   PageWriter failing(stand_in(dir.path(), 3), dir.path() / "run", 1.0);

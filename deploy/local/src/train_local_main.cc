@@ -11,7 +11,6 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <optional>
-#include <sstream>
 
 #include "indrive/actor/env_adapter.h"
 #include "indrive/basics/data_path.h"
@@ -84,11 +83,8 @@ int main(int argc, char** argv) {
         static_cast<long long>(run.updates()), run.coverage().distinct_per_window(),
         100.0 * run.coverage().fraction_visited());
     if (page) {
-      std::ostringstream ended;
-      ended << "ended: " << (stop.load() ? "stopped by a signal" : "budget reached") << " at "
-            << run.env_steps() << " env steps and " << run.updates()
-            << " updates, indrive-train-local exit code 0";
-      page->finish(ended.str());
+      page->finish(indrive::learner::training_ended(stop.load(), run.env_steps(), run.updates(),
+                                                    "indrive-train-local", 0));
     }
     return 0;
   } catch (const std::exception& error) {

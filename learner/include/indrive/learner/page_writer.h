@@ -15,6 +15,7 @@
 
 #include <sys/types.h>
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
 
@@ -53,5 +54,10 @@ class PageWriter {
   double wall_s_ = 0.0;
   bool finished_ = false;
 };
+
+// The last words of a training program's page: "ended: budget reached at N env steps and M
+// updates, <program> exit code C" (or "stopped by a signal").
+std::string training_ended(bool stopped, std::int64_t env_steps, std::int64_t updates,
+                           const std::string& program, int exit_code);
 
 }  // namespace indrive::learner
