@@ -108,5 +108,24 @@ TEST(IndriveDashboard, SeveralRunsNeedAPageNameAndAFolderThatIsNoRunIsNamed) {
       << testing::slurp(bad_log);
 }
 
+// --ended writes how the run ended at the top of a one-off page; --until-eof only goes with
+// --watch (the page writer's flags; the pipe itself is page_writer_test's).
+TEST(IndriveDashboard, EndedTextOnAOneOffPageAndUntilEofNeedsWatch) {
+  testing::TempDir dir;
+  const auto run = write_run(dir.path() / "s0", 0.01);
+  const auto log = dir.path() / "ended.log";
+  testing::Child ended({kIndrive.string(), "dashboard", run.string(), "--ended", "ended: by hand"},
+                       log);
+  ASSERT_EQ(ended.wait(30s), 0) << testing::slurp(log);
+  const std::string page = testing::slurp(run / "index.html");
+  EXPECT_NE(page.find("<span class=\"ended\">ended: by hand</span>"), std::string::npos);
+  EXPECT_EQ(page.find("http-equiv=\"refresh\""), std::string::npos);
+
+  const auto bad_log = dir.path() / "bad.log";
+  testing::Child bad({kIndrive.string(), "dashboard", run.string(), "--until-eof"}, bad_log);
+  EXPECT_NE(bad.wait(30s), 0);
+  EXPECT_NE(testing::slurp(bad_log).find("--watch"), std::string::npos) << testing::slurp(bad_log);
+}
+
 }  // namespace
 }  // namespace indrive
