@@ -25,7 +25,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// The folder of this executable: its sibling programs live there (build/bin).
 // The runs of `indrive compare` and `indrive dashboard`: each positional run its own group, then
 // each --group LABEL=RUN[,RUN...], whose runs must be directories.
 std::vector<indrive::deploy::CompareGroup> run_groups(const std::vector<fs::path>& runs,
@@ -60,8 +59,8 @@ void add_run_options(CLI::App* command, std::vector<fs::path>& runs,
 volatile sig_atomic_t g_stop = 0;
 void on_stop_signal(int) { g_stop = 1; }
 
-// The last line read from standard input until it ends (`--until-eof`); nullopt while it is
-// open. What the program feeding the page (the learner) says of how the run ended.
+// Standard input read until it ends (`--until-eof`): its last line is what the program feeding
+// the page (the learner) says of how the run ended.
 class InputEnd {
  public:
   // Whether standard input has reached its end; waits up to `wait_ms` for it.

@@ -83,7 +83,7 @@ PageWriter::PageWriter(const fs::path& program, const fs::path& run_dir, double 
                                 << log << ")";
 }
 
-PageWriter::~PageWriter() { finish("ended: the learner stopped without saying how", 10.0); }
+PageWriter::~PageWriter() { finish("ended: the program stopped without saying how", 10.0); }
 
 bool PageWriter::finish(const std::string& how_it_ended, double wait_s) {
   if (finished_ || pid_ <= 0) return false;

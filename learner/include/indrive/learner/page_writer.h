@@ -28,7 +28,7 @@ class PageWriter {
   // not start leaves the writer off with one warning that says what to do; never throws.
   PageWriter(const std::filesystem::path& program, const std::filesystem::path& run_dir,
              double interval_s);
-  // Same as finish("the learner object ended without a word").
+  // Same as finish("ended: the program stopped without saying how").
   ~PageWriter();
   PageWriter(const PageWriter&) = delete;
   PageWriter& operator=(const PageWriter&) = delete;
