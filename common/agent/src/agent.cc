@@ -252,9 +252,10 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     reward_opt_->step();
   }
   behavior.step();
-  // Gradients that reached frozen parts (none should) are dropped, never applied later.
-  wm_->params().zero_grad();
-  intrinsic_->params().zero_grad();
+  // Gradients that reached frozen parts (none should) are dropped, never applied later (the
+  // optimisers that stepped have zeroed their own).
+  if (phase == Phase::kFinetune) wm_->params().zero_grad();
+  if (phase != Phase::kPretrain) intrinsic_->params().zero_grad();
   timing_.optimizers = clock.lap(&flops_.optimizers);
   ++train_steps_;
   return metrics;

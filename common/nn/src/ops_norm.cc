@@ -84,11 +84,16 @@ void layer_norm_backward(Node& n) {
       const float* g = g_chunk + (r - r0) * cols;
       const float rs = rstd[r];
       // dxhat = g * gamma; dx = rstd * (dxhat - mean(dxhat) - xhat * mean(dxhat * xhat)).
-      float sum_d = 0.0f, sum_dx = 0.0f;
-      for (std::int64_t c = 0; c < cols; ++c) {
-        const float d = gam ? g[c] * gam[c] : g[c];
-        sum_d += d;
-        sum_dx += d * xh[c];
+      // As in the forward pass, the row sums are vector reductions.
+      const detail::ConstArray ga(g, cols), xha(xh, cols);
+      float sum_d, sum_dx;
+      if (gam) {
+        const detail::ConstArray gama(gam, cols);
+        sum_d = (ga * gama).sum();
+        sum_dx = (ga * gama * xha).sum();
+      } else {
+        sum_d = ga.sum();
+        sum_dx = (ga * xha).sum();
       }
       if (pg) {
         for (std::int64_t c = 0; c < cols; ++c) pg[c] += g[c] * xh[c];
@@ -141,25 +146,25 @@ Tensor layer_norm_impl(Tensor x, Tensor gamma, Tensor beta, float eps, bool with
     for (std::int64_t r = r0; r < r1; ++r) {
       const float* xr = xv + r * cols;
       float* yr = y + r * cols;
-      float mu = 0.0f;
-      for (std::int64_t c = 0; c < cols; ++c) mu += xr[c];
-      mu *= inv_c;
-      float var = 0.0f;
-      for (std::int64_t c = 0; c < cols; ++c) var += (xr[c] - mu) * (xr[c] - mu);
-      var *= inv_c;
+      // The row sums run as Eigen reductions, which keep several vector accumulators: a plain
+      // float loop is one serial chain of adds (the compiler may not reorder them), and made
+      // this op 10% of a tiny agent update.
+      const detail::ConstArray in(xr, cols);
+      auto out = detail::Array(yr, cols);
+      const float mu = in.sum() * inv_c;
+      const float var = (in - mu).square().sum() * inv_c;
       const float rs = 1.0f / std::sqrt(var + eps);
       mean[r] = mu;
       rstd[r] = rs;
-      for (std::int64_t c = 0; c < cols; ++c) {
-        float v = (xr[c] - mu) * rs;
-        if (gam) v *= gam[c];
-        if (bet) v += bet[c];
-        yr[c] = v;
-      }
-      if (with_silu) {
-        auto out = detail::Array(yr, cols);
-        out = out * out.logistic();
-      }
+      if (gam && bet)
+        out = (in - mu) * rs * detail::ConstArray(gam, cols) + detail::ConstArray(bet, cols);
+      else if (gam)
+        out = (in - mu) * rs * detail::ConstArray(gam, cols);
+      else if (bet)
+        out = (in - mu) * rs + detail::ConstArray(bet, cols);
+      else
+        out = (in - mu) * rs;
+      if (with_silu) out = out * out.logistic();
     }
   });
   g.record(
@@ -236,10 +241,9 @@ void softmax_rows(const float* x, float* y, std::int64_t rows, std::int64_t cols
     for (std::int64_t r = r0; r < r1; ++r) {
       const float* xr = x + r * cols;
       float* yr = y + r * cols;
-      float mx = xr[0];
-      for (std::int64_t c = 1; c < cols; ++c) mx = std::max(mx, xr[c]);
       auto in = detail::ConstArray(xr, cols);
       auto out = detail::Array(yr, cols);
+      const float mx = in.maxCoeff();  // a vector reduction, as in LayerNorm
       out = (in - mx).exp();
       const float total = out.sum();
       if (log)

@@ -2,19 +2,26 @@
 #include "indrive/nn/optim.h"
 
 #include <cmath>
+#include <span>
+#include <utility>
 
 #include "bytes.h"
 #include "indrive/basics/check.h"
 #include "indrive/nn/serialize.h"
+#include "ops_internal.h"
 
 namespace indrive::nn {
 
 float grad_norm(const ParamGroup& group) {
+  // In double, as a vector reduction (Eigen keeps several accumulators; a plain loop is one
+  // serial chain of adds and took most of the optimiser stage of a tiny update).
   double total = 0.0;
   for (const auto& p : group.params()) {
-    double s = 0.0;
-    for (float g : p->grad()) s += static_cast<double>(g) * g;
-    total += s;
+    const std::span<const float> g = std::as_const(*p).grad();
+    total += detail::ConstArray(g.data(), static_cast<std::int64_t>(g.size()))
+                 .cast<double>()
+                 .square()
+                 .sum();
   }
   return static_cast<float>(std::sqrt(total));
 }
@@ -56,14 +63,17 @@ StepStats Adam::step() {
     float* g = p.grad().data();
     float* m = m_[i].data();
     float* v = v_[i].data();
-    const std::int64_t n = p.numel();
-    for (std::int64_t j = 0; j < n; ++j) {
-      const float gj = g[j] * clip_scale;
-      m[j] = b1 * m[j] + (1.0f - b1) * gj;
-      v[j] = b2 * v[j] + (1.0f - b2) * gj * gj;
-      w[j] = w[j] * decay - step_size * m[j] / (std::sqrt(v[j]) * inv_sqrt_c2 + config_.eps);
-      g[j] = 0.0f;
-    }
+    // Elementwise, so large parameters are split over the threads (fixed chunks: the result
+    // does not depend on the thread count). Written as Eigen array expressions because a plain
+    // loop stays scalar: std::sqrt may set errno, so the compiler keeps it out of vector code.
+    detail::parallel_for(p.numel(), [&](std::int64_t s, std::int64_t e) {
+      const std::int64_t len = e - s;
+      detail::Array gs(g + s, len), ms(m + s, len), vs(v + s, len), ws(w + s, len);
+      ms = b1 * ms + ((1.0f - b1) * clip_scale) * gs;
+      vs = b2 * vs + ((1.0f - b2) * clip_scale * clip_scale) * gs.square();
+      ws = ws * decay - step_size * ms / (vs.sqrt() * inv_sqrt_c2 + config_.eps);
+      gs.setZero();
+    });
   }
   return stats;
 }
