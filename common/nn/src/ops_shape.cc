@@ -1,4 +1,5 @@
 // Shape ops (reshape, concat, slice, stop_gradient) and reductions.
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
@@ -180,10 +181,16 @@ void reduce_backward(Node& n) {
   const float f = n.fparam[0];
   if (inner == 1) {
     // Rows broadcast their one gradient value (the common case: sums over the last axis).
+    // Row by row over each chunk: no division per element.
     detail::parallel_for(outer * size, [&](std::int64_t s, std::int64_t e) {
-      for (std::int64_t i = s; i < e; ++i) {
-        const float v = f * n.grad[i / size];
-        gx[i] = fresh ? v : gx[i] + v;
+      for (std::int64_t i = s; i < e;) {
+        const std::int64_t row = i / size, end = std::min(e, (row + 1) * size);
+        const float v = f * n.grad[row];
+        if (fresh)
+          std::fill(gx + i, gx + end, v);
+        else
+          for (std::int64_t j = i; j < end; ++j) gx[j] += v;
+        i = end;
       }
     });
     return;
