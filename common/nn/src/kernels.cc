@@ -318,7 +318,20 @@ const std::uint16_t* bf16_operand(ThreadContext& ctx, const detail::GemmOperand&
 void onednn_gemm(float* dst, const detail::GemmOperand& a, const detail::GemmOperand& b,
                  bool accumulate, bool bf16) {
   ThreadContext& ctx = context();
-  const int threads = omp_in_parallel() ? 1 : omp_get_max_threads();
+  // As on the Eigen path, a small product runs on the calling thread: oneDNN takes its thread
+  // count from OpenMP, so it is lowered to 1 around the primitive (and restored after).
+  const int max_threads = omp_in_parallel() ? 1 : omp_get_max_threads();
+  const bool small = a.rows * b.cols * a.cols < kParallelGemmWork;
+  const int threads = small ? 1 : max_threads;
+  struct OmpThreads {
+    int restore;
+    explicit OmpThreads(int set, int was) : restore(set != was ? was : 0) {
+      if (restore) omp_set_num_threads(set);
+    }
+    ~OmpThreads() {
+      if (restore) omp_set_num_threads(restore);
+    }
+  } omp_threads(threads, max_threads);
   const MatmulEntry& mm = matmul_for(ctx, a, b, accumulate, bf16, threads);
   const void* ap = a.data;
   const void* bp = b.data;
