@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <vector>
 
 #include "grad_check.h"
 #include "indrive/nn/nn.h"
@@ -250,6 +252,33 @@ TEST_F(OpsTest, LayerNormLargeInputsSplitIntoChunksMatchRowByRow) {
     in_.zero_grad();
   }
   EXPECT_NEAR(total, expect, 1e-3 * std::fabs(expect) + 1e-3);
+}
+
+// The row ops (LayerNorm with SiLU, softmax, log-softmax, a row sum and its backward) on inputs
+// large enough to be split over threads give the same bits with 1 and 2 threads.
+TEST_F(OpsTest, RowOpsGiveTheSameBitsWithOneAndTwoThreads) {
+  Parameter& x = input("x", {2048, 96}, -3.0f, 3.0f);
+  Parameter& g = input("g", {96}, 0.5f, 1.5f);
+  Parameter& b = input("b", {96});
+  auto run = [&](int threads) {
+    const int saved = nn::threads();
+    set_threads(threads);
+    current_graph().reset();
+    in_.zero_grad();
+    Tensor y = layer_norm_silu(x.tensor(), g.tensor(), b.tensor());
+    Tensor s = softmax(reshape(y, Shape{2048 * 6, 16}));
+    Tensor l = log_softmax(y);
+    Tensor loss = add(sum(mul(s, s)), mean(sum(l, -1)));
+    current_graph().backward(loss);
+    std::vector<float> out(s.data(), s.data() + s.numel());
+    out.insert(out.end(), l.data(), l.data() + l.numel());
+    for (Parameter* p : {&x, &g, &b}) out.insert(out.end(), p->grad().begin(), p->grad().end());
+    set_threads(saved);
+    return out;
+  };
+  const std::vector<float> one = run(1), two = run(2);
+  ASSERT_EQ(one.size(), two.size());
+  EXPECT_EQ(std::memcmp(one.data(), two.data(), one.size() * sizeof(float)), 0);
 }
 
 TEST_F(OpsTest, SoftmaxGradientsAndValues) {

@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <vector>
 
 #include "indrive/nn/nn.h"
 
@@ -108,6 +110,52 @@ TEST(AdamTest, StateRoundTripContinuesIdentically) {
   auto blob = a1.save_state();
   blob[blob.size() / 2] ^= 0x01;
   EXPECT_THROW(a2.load_state(blob), SerializationError);
+}
+
+// A parameter large enough for the update to be split over threads (the small ones above run
+// in one piece): every element against the reference in double, with clipping, and the same
+// bits with 1 and 2 threads.
+TEST(AdamTest, LargeParameterMatchesReferenceWithAnyThreadCount) {
+  constexpr int kSize = 150000;
+  auto run = [](int threads) {
+    const int saved = nn::threads();
+    set_threads(threads);
+    ParamGroup g("g");
+    Parameter& p = g.add("p", Shape{kSize});
+    for (int i = 0; i < kSize; ++i) p.value()[i] = std::sin(0.001f * i);
+    Adam adam(g, {.lr = 0.01f, .eps = 1e-8f, .clip = 50.0f});
+    for (int t = 0; t < 3; ++t) {
+      for (int i = 0; i < kSize; ++i) p.grad()[i] = std::cos(0.002f * i + t) * (1 + i % 7);
+      adam.step();
+    }
+    set_threads(saved);
+    return std::vector<float>(p.value().begin(), p.value().end());
+  };
+  const std::vector<float> one = run(1), two = run(2);
+  ASSERT_EQ(one.size(), two.size());
+  EXPECT_EQ(std::memcmp(one.data(), two.data(), one.size() * sizeof(float)), 0);
+  // The reference: the same three steps in double, clipped by the global norm.
+  std::vector<double> w(kSize), m(kSize, 0.0), v(kSize, 0.0), grad(kSize);
+  for (int i = 0; i < kSize; ++i) w[i] = std::sin(0.001f * i);
+  for (int t = 1; t <= 3; ++t) {
+    double norm = 0;
+    for (int i = 0; i < kSize; ++i) {
+      grad[i] = static_cast<float>(std::cos(0.002f * i + (t - 1)) * (1 + i % 7));
+      norm += grad[i] * grad[i];
+    }
+    norm = std::sqrt(norm);
+    const double clip = norm > 50.0 ? 50.0 / norm : 1.0;
+    for (int i = 0; i < kSize; ++i) {
+      const double gi = grad[i] * clip;
+      m[i] = 0.9 * m[i] + 0.1 * gi;
+      v[i] = 0.999 * v[i] + 0.001 * gi * gi;
+      const double mh = m[i] / (1 - std::pow(0.9, t)), vh = v[i] / (1 - std::pow(0.999, t));
+      w[i] -= 0.01 * mh / (std::sqrt(vh) + 1e-8);
+    }
+  }
+  int off = 0;
+  for (int i = 0; i < kSize; ++i) off += std::fabs(one[i] - w[i]) > 1e-5;
+  EXPECT_EQ(off, 0) << "elements away from the reference";
 }
 
 TEST(EmaTest, MovesTowardsTheSource) {
