@@ -229,6 +229,32 @@ TEST_F(OpsTest, LayerNormGradientsAndValues) {
   }
 }
 
+// The widths with their own fixed-size kernel (8, 16, 32) and others, with and without SiLU,
+// against the formula in double.
+TEST_F(OpsTest, LayerNormEveryWidthMatchesTheFormula) {
+  for (int cols : {5, 8, 16, 24, 32, 128}) {
+    const std::string w = std::to_string(cols);
+    Parameter& x = input("x" + w, {7, cols}, -2.0f, 2.0f);
+    Parameter& g = input("g" + w, {cols}, 0.5f, 1.5f);
+    Parameter& b = input("b" + w, {cols});
+    for (bool with_silu : {false, true}) {
+      Tensor y = with_silu ? layer_norm_silu(x.tensor(), g.tensor(), b.tensor(), 1e-3f)
+                           : layer_norm(x.tensor(), g.tensor(), b.tensor(), 1e-3f);
+      for (int r = 0; r < 7; ++r) {
+        double mu = 0, var = 0;
+        for (int c = 0; c < cols; ++c) mu += x.value()[r * cols + c] / cols;
+        for (int c = 0; c < cols; ++c) var += std::pow(x.value()[r * cols + c] - mu, 2) / cols;
+        for (int c = 0; c < cols; ++c) {
+          double v =
+              (x.value()[r * cols + c] - mu) / std::sqrt(var + 1e-3) * g.value()[c] + b.value()[c];
+          if (with_silu) v = v / (1 + std::exp(-v));
+          EXPECT_NEAR(y.data()[r * cols + c], v, 1e-5) << "width " << cols << " row " << r;
+        }
+      }
+    }
+  }
+}
+
 TEST_F(OpsTest, LayerNormLargeInputsSplitIntoChunksMatchRowByRow) {
   // Enough rows for the chunked (and possibly parallel) path; compare against small calls.
   Parameter& x = input("x", {3000, 24}, -2.0f, 2.0f);
