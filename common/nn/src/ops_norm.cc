@@ -265,20 +265,37 @@ void log_softmax_backward(Node& n) {
 }
 
 // Writes softmax (or log-softmax) of each row of x into y.
+// Softmax (or log-softmax) of rows [r0, r1); C is a compile-time width or Eigen::Dynamic, as
+// in LayerNorm.
+template <int C>
+void softmax_row_range(const float* x, float* y, std::int64_t r0, std::int64_t r1,
+                       std::int64_t cols, bool log) {
+  using Row = Eigen::Array<float, C, 1>;
+  for (std::int64_t r = r0; r < r1; ++r) {
+    const Eigen::Map<const Row> in(x + r * cols, cols);
+    Eigen::Map<Row> out(y + r * cols, cols);
+    const float mx = in.maxCoeff();  // a vector reduction, as in LayerNorm
+    out = (in - mx).exp();
+    const float total = out.sum();
+    if (log)
+      out = in - (mx + std::log(total));
+    else
+      out *= 1.0f / total;
+  }
+}
+
 void softmax_rows(const float* x, float* y, std::int64_t rows, std::int64_t cols, bool log) {
   for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
-    for (std::int64_t r = r0; r < r1; ++r) {
-      const float* xr = x + r * cols;
-      float* yr = y + r * cols;
-      auto in = detail::ConstArray(xr, cols);
-      auto out = detail::Array(yr, cols);
-      const float mx = in.maxCoeff();  // a vector reduction, as in LayerNorm
-      out = (in - mx).exp();
-      const float total = out.sum();
-      if (log)
-        out = in - (mx + std::log(total));
-      else
-        out *= 1.0f / total;
+    // The latents' 16 and 32 classes get a fixed-size kernel (one or two vectors per row).
+    switch (cols) {
+      case 16:
+        softmax_row_range<16>(x, y, r0, r1, cols, log);
+        break;
+      case 32:
+        softmax_row_range<32>(x, y, r0, r1, cols, log);
+        break;
+      default:
+        softmax_row_range<Eigen::Dynamic>(x, y, r0, r1, cols, log);
     }
   });
 }

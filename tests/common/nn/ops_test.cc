@@ -327,6 +327,24 @@ TEST_F(OpsTest, SoftmaxGradientsAndValues) {
   EXPECT_NEAR(big.data()[1], -1000.0f, 1e-3f);
 }
 
+// The widths with their own fixed-size kernel (16, 32) and others against the formula.
+TEST_F(OpsTest, SoftmaxEveryWidthMatchesTheFormula) {
+  for (int cols : {9, 16, 32, 255}) {
+    Parameter& x = input("x" + std::to_string(cols), {5, cols}, -4.0f, 4.0f);
+    Tensor p = softmax(x.tensor());
+    Tensor lp = log_softmax(x.tensor());
+    for (int r = 0; r < 5; ++r) {
+      double total = 0;
+      for (int c = 0; c < cols; ++c) total += std::exp(x.value()[r * cols + c]);
+      for (int c = 0; c < cols; ++c) {
+        const double logp = x.value()[r * cols + c] - std::log(total);
+        EXPECT_NEAR(p.data()[r * cols + c], std::exp(logp), 1e-6) << "width " << cols;
+        EXPECT_NEAR(lp.data()[r * cols + c], logp, 1e-5) << "width " << cols;
+      }
+    }
+  }
+}
+
 // Direct NHWC convolution for reference; w is (K*K*C, O) ordered (ky, kx, c).
 std::vector<float> naive_conv(const Parameter& x, const Parameter& w, int k, int s, int p, int oh,
                               int ow, int oc) {
