@@ -14,7 +14,7 @@ namespace indrive::nn {
 
 float grad_norm(const ParamGroup& group) {
   // In double, as a vector reduction (Eigen keeps several accumulators; a plain loop is one
-  // serial chain of adds and took most of the optimiser stage of a tiny update).
+  // serial chain of adds).
   double total = 0.0;
   for (const auto& p : group.params()) {
     const std::span<const float> g = std::as_const(*p).grad();
