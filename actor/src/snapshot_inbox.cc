@@ -33,6 +33,8 @@ bool SnapshotInbox::offer(const msg::PolicySnapshot& snapshot) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (newest_ != nullptr && newest_->version() >= snapshot.version()) return false;
   newest_ = std::move(copy);
+  // Something arrived: a newer announced version is given request_after_s from now.
+  announced_since_ = Clock::now();
   drops_.record(dds::DropReason::kOk);
   return true;
 }
@@ -41,8 +43,12 @@ void SnapshotInbox::announce(const msg::SnapshotAnnounce& announce) {
   if (dds::validate(announce, run_id_) != dds::DropReason::kOk) return;
   std::lock_guard<std::mutex> lock(mutex_);
   if (announce.version() > announced_) {
+    // The wait before a request counts from when a version newer than the held one was first
+    // announced, not from the newest announce: a learner announcing faster than request_after_s
+    // must not put off the request for ever.
+    const std::uint64_t held = newest_ ? newest_->version() : 0;
+    if (announced_ <= held) announced_since_ = Clock::now();
     announced_ = announce.version();
-    announced_since_ = Clock::now();
   }
   if (announce.learner_done()) final_ = std::max(final_, announce.version());
 }

@@ -68,6 +68,7 @@ struct Learner::Impl {
     budget = c.get<std::int64_t>("run.budget_env_steps");
     snapshot_every = c.get<std::int64_t>("learner.snapshot_every");
     announce_s = c.get<double>("learner.announce_s");
+    hold_s = c.get<double>("learner.snapshot_hold_s");
     log_interval_s = c.get<double>("learner.log_interval_s");
     log_every_steps = c.get<std::int64_t>("learner.log_every_env_steps");
     checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
@@ -79,7 +80,7 @@ struct Learner::Impl {
     fill_floor = stats.counters.env_steps + std::max<std::int64_t>(0, fill_target - replay.size());
 
     endpoints = std::make_unique<dds::EndpointSet>(service.participant_options("learner"));
-    publisher.emplace(*endpoints, config.run_id());
+    publisher.emplace(*endpoints, config.run_id(), hold_s);
     allowance_writer = &endpoints->writer<msg::StepAllowance>();
     heartbeat_writer = &endpoints->writer<msg::Heartbeat>();
     endpoints->reader<msg::TrajectoryChunk>(
@@ -237,7 +238,42 @@ struct Learner::Impl {
       INDRIVE_LOG(kError, "learner") << "update failed and was skipped: " << error.what();
     }
     ++stats.counters.updates;
-    if (stats.counters.updates % snapshot_every == 0) publish_snapshot();
+    if (stats.counters.updates % snapshot_every == 0) snapshot_due = true;
+    publish_due_snapshot();
+  }
+
+  // Writes the due snapshot once the last one has reached every reader (or waited
+  // learner.snapshot_hold_s); until then training goes on and the snapshot stays due, so a slow
+  // reader gets fewer snapshots, each of them whole, and the parameters are taken when it goes.
+  void publish_due_snapshot() {
+    if (!snapshot_due) return;
+    if (!publisher->ready()) {
+      if (!snapshot_held) {
+        snapshot_held = true;
+        ++stats.snapshots_held;
+        if (seconds_since(last_hold_warning) >= 60.0) {
+          last_hold_warning = std::chrono::steady_clock::now();
+          INDRIVE_LOG(kInfo, "learner")
+              << "snapshot due at " << stats.counters.updates << " updates waits: a reader has "
+              << "not yet acknowledged v" << stats.counters.policy_version << " ("
+              << publisher->newest()->params().size() / 1e6
+              << " MB), so a new one would start it over; it goes when every reader has it, "
+                 "or after learner.snapshot_hold_s (logged at most once a minute)";
+        }
+      }
+      return;
+    }
+    if (snapshot_held && !publisher->delivered()) {
+      ++stats.snapshot_holds_expired;
+      INDRIVE_LOG(kWarn, "learner")
+          << "v" << stats.counters.policy_version << " was not acknowledged by every reader "
+          << "within learner.snapshot_hold_s = " << hold_s << " s; publishing the next anyway "
+          << "(a reader has gone, or its link carries less than one snapshot per " << hold_s
+          << " s)";
+    }
+    snapshot_held = false;
+    snapshot_due = false;
+    publish_snapshot();
   }
 
   void publish_snapshot() {
@@ -329,6 +365,8 @@ struct Learner::Impl {
                    {"replay_added", replay.total_added()},
                    {"snapshots_published", stats.snapshots_published},
                    {"snapshot_requests", stats.snapshot_requests},
+                   {"snapshots_held", stats.snapshots_held},
+                   {"snapshot_holds_expired", stats.snapshot_holds_expired},
                    {"chunks", stats.chunks},
                    {"replay_actors", chunks.actors()},
                    {"dropped_chunks", drops.dropped()},
@@ -379,6 +417,7 @@ struct Learner::Impl {
       // and take them again, running ahead of the replay ratio on a slow or loaded machine.
       worked = drain() || worked;
       publish_pacing(false);
+      publish_due_snapshot();
       if (publisher->take_request() && publisher->republish(done)) ++stats.snapshot_requests;
       if (publisher->seconds_since_announce() >= announce_s) publisher->announce(done);
       log_metrics();
@@ -398,7 +437,9 @@ struct Learner::Impl {
     // a snapshot written just before the learner exits can be lost to readers still fetching
     // it, and the newest periodic snapshot is the run's final policy otherwise. The learner
     // lingers briefly so readers can fetch it.
-    if (done && stats.counters.updates > 0 && !publisher->newest()) {
+    // A snapshot still held for a slow reader goes now too: it is the run's final policy.
+    if (done && stats.counters.updates > 0 && (!publisher->newest() || snapshot_due)) {
+      snapshot_due = false;
       publish_snapshot();
       INDRIVE_LOG(kInfo, "learner") << "final snapshot v" << stats.counters.policy_version << " at "
                                     << stats.counters.updates << " updates";
@@ -446,6 +487,10 @@ struct Learner::Impl {
   EvaluationTally evaluations;  // evaluators' results, on the metrics lines
   std::int64_t budget = 0;
   std::int64_t snapshot_every = 10;
+  double hold_s = 10.0;
+  bool snapshot_due = false;   // snapshot_every updates passed since the last snapshot
+  bool snapshot_held = false;  // ... and it waits for a reader to acknowledge the last one
+  std::chrono::steady_clock::time_point last_hold_warning{};
   double announce_s = 1.0;
   double log_interval_s = 5.0;
   std::int64_t log_every_steps = 1000;

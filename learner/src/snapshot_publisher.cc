@@ -44,22 +44,43 @@ void VersionReservation::release(std::uint64_t published) {
   }
 }
 
-SnapshotPublisher::SnapshotPublisher(dds::EndpointSet& endpoints, std::string run_id)
+SnapshotPublisher::SnapshotPublisher(dds::EndpointSet& endpoints, std::string run_id, double hold_s)
     : run_id_(std::move(run_id)),
       snapshot_writer_(endpoints.writer<msg::PolicySnapshot>()),
-      announce_writer_(endpoints.writer<msg::SnapshotAnnounce>()) {
+      announce_writer_(endpoints.writer<msg::SnapshotAnnounce>()),
+      hold_(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+          std::chrono::duration<double>(hold_s))) {
   endpoints.reader<msg::SnapshotRequest>([this](const msg::SnapshotRequest& request) {
     if (dds::validate(request, run_id_) != dds::DropReason::kOk) return;
     requested_.store(true);
   });
 }
 
+bool SnapshotPublisher::ready() const {
+  return !newest_ || std::chrono::steady_clock::now() - last_write_ >= hold_ || delivered();
+}
+
+bool SnapshotPublisher::delivered() const {
+  // A zero timeout only looks: true when nothing written is unacknowledged by a matched reader.
+  return snapshot_writer_.wait_for_acknowledgments(std::chrono::milliseconds(0));
+}
+
 void SnapshotPublisher::publish(msg::PolicySnapshot snapshot, bool done) {
   snapshot.run_id(run_id_);
   dds::seal(snapshot);
   snapshot_writer_.write(snapshot);
+  last_write_ = std::chrono::steady_clock::now();
   newest_ = std::move(snapshot);
   announce(done);
+}
+
+bool SnapshotPublisher::wait_until_delivered(std::chrono::milliseconds timeout) {
+  return snapshot_writer_.wait_for_acknowledgments(timeout);
+}
+
+double SnapshotPublisher::seconds_since_write() const {
+  if (!newest_) return 1e9;
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - last_write_).count();
 }
 
 void SnapshotPublisher::announce(bool done) {
@@ -76,8 +97,9 @@ void SnapshotPublisher::announce(bool done) {
 }
 
 bool SnapshotPublisher::republish(bool done) {
-  if (!newest_) return false;
+  if (!newest_ || !ready()) return false;
   snapshot_writer_.write(*newest_);
+  last_write_ = std::chrono::steady_clock::now();
   announce(done);
   return true;
 }

@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <thread>
+
 namespace indrive::actor {
 namespace {
 
@@ -70,6 +73,29 @@ TEST(SnapshotInboxTest, ReRequestsAnAnnouncedSnapshotThatDidNotArrive) {
   inbox.offer(snapshot(4));
   EXPECT_FALSE(inbox.should_request(0, later + std::chrono::seconds(5))) << "it arrived";
   EXPECT_FALSE(inbox.should_request(4, later + std::chrono::seconds(5)));
+}
+
+// A learner that announces a newer version more often than request_after_s (a fast learner,
+// a snapshot that takes longer than that to cross a slow link) must not put the request off:
+// the wait counts from the first version announced beyond the one held.
+TEST(SnapshotInboxTest, AnnouncesFasterThanTheWaitDoNotPutTheRequestOff) {
+  SnapshotInbox inbox("run-a", "arch-1", /*request_after_s=*/0.5);
+  const auto first = SnapshotInbox::Clock::now();
+  inbox.announce(announce(4));
+  for (std::uint64_t version = 5; version <= 7; ++version) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+    inbox.announce(announce(version));
+  }
+  const auto now = SnapshotInbox::Clock::now();
+  ASSERT_GE(now - first, std::chrono::milliseconds(500));
+  EXPECT_TRUE(inbox.should_request(0, now)) << "v4 was announced over 0.5 s ago and is missing";
+
+  // A snapshot that arrives restarts the wait for the newer ones.
+  inbox.offer(snapshot(5));
+  const auto arrived = SnapshotInbox::Clock::now();
+  inbox.announce(announce(8));
+  EXPECT_FALSE(inbox.should_request(5, arrived + std::chrono::milliseconds(100)));
+  EXPECT_TRUE(inbox.should_request(5, arrived + std::chrono::seconds(1)));
 }
 
 TEST(SnapshotInboxTest, TheLearnersFinalAnnounceNamesTheLastVersion) {

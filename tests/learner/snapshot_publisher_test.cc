@@ -52,7 +52,8 @@ TEST(SnapshotPublisherTest, PublishesKeepsRepublishesAndAnnounces) {
       .domain_id = testing::unique_domain_id(),
       .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()};
   dds::EndpointSet learner(options);
-  SnapshotPublisher publisher(learner, "run-p");
+  SnapshotPublisher publisher(learner, "run-p", /*hold_s=*/10.0);
+  EXPECT_TRUE(publisher.ready()) << "the first snapshot waits for nothing";
   EXPECT_FALSE(publisher.newest());
   EXPECT_FALSE(publisher.republish(false)) << "nothing to write before the first snapshot";
 
@@ -88,6 +89,11 @@ TEST(SnapshotPublisherTest, PublishesKeepsRepublishesAndAnnounces) {
   dds::seal(request);
   requests.write(request);
   for (int i = 0; i < 500 && !publisher.take_request(); ++i) std::this_thread::sleep_for(10ms);
+  // Written again only once the reader has the first write: a second write would replace the
+  // first under a reader still fetching it.
+  ASSERT_TRUE(publisher.wait_until_delivered(10s));
+  EXPECT_TRUE(publisher.delivered());
+  EXPECT_TRUE(publisher.ready()) << "delivered: the next snapshot may go";
   EXPECT_TRUE(publisher.republish(/*done=*/true));
   publisher.announce_final(/*done=*/true);
 

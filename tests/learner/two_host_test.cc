@@ -64,7 +64,9 @@ class TwoHosts : public ::testing::Test {
     children_.push_back(std::make_unique<Child>(argv, dir_.path() / (name + ".log")));
     return *children_.back();
   }
-  Child& learner() { return start(hosts_->on_a(args("indrive-learner")), "learner"); }
+  Child& learner() {
+    return start(hosts_->on_a(args("indrive-learner", learner_overrides_)), "learner");
+  }
   Child& actor(int id, bool remote) {
     auto argv = args("indrive-actor");
     argv.insert(argv.end(), {"--id", std::to_string(id)});
@@ -189,6 +191,7 @@ class TwoHosts : public ::testing::Test {
   fs::path profile_ = testing::source_path("deploy/dds/default.xml");
   std::string discovery_server_;
   fs::path security_;  // a make_security.sh folder every service process uses, when set
+  std::vector<std::string> learner_overrides_;
   std::vector<std::unique_ptr<Child>> children_;
 };
 
@@ -196,6 +199,43 @@ TEST_F(TwoHosts, ALateEvaluatorOnTheOtherHostGetsTheNewestSnapshotOverUdp) {
   make_hosts(/*multicast=*/true);
   if (IsSkipped()) return;
   late_evaluator_gets_the_newest_snapshot("UDP, multicast discovery");
+}
+
+// A link slower than the learner publishes: shaped to 16 Mbit/s, with the snapshot writer's
+// flow controller set below that (1.6 MB/s; the README's recipe for a slow link), one tiny
+// snapshot takes over a second to cross while the learner makes one every 2 updates here. Were
+// each new snapshot written at once, it would replace the last in the writer's history under the
+// evaluator still fetching it, and the evaluator would never hold a whole one: the learner holds
+// a due snapshot until every reader has the last (learner.snapshot_hold_s).
+TEST_F(TwoHosts, ALateEvaluatorBehindASlowLinkStillGetsASnapshot) {
+  make_hosts(/*multicast=*/true);
+  if (IsSkipped()) return;
+  const char* rate = std::getenv("INDRIVE_LINK_RATE");  // for experiments; 16mbit by default
+  std::string why;
+  if (!hosts_->limit_rate_a_to_b(rate != nullptr ? rate : "16mbit", why)) GTEST_SKIP() << why;
+  if (const char* hold = std::getenv("INDRIVE_SNAPSHOT_HOLD_S"))  // for experiments
+    learner_overrides_.push_back(std::string("learner.snapshot_hold_s=") + hold);
+  std::string profile = testing::slurp(profile_);
+  const std::string fast = "<bytesPerPeriod>1048576</bytesPerPeriod>";
+  ASSERT_NE(profile.find(fast), std::string::npos) << "the policy writer's flow controller moved";
+  profile.replace(profile.find(fast), fast.size(), "<bytesPerPeriod>16384</bytesPerPeriod>");
+  profile_ = dir_.path() / "slow_link.xml";
+  std::ofstream(profile_) << profile;
+  late_evaluator_gets_the_newest_snapshot(std::string("link shaped to ") +
+                                          (rate != nullptr ? rate : "16mbit"));
+  const auto lines = metrics();
+  ASSERT_FALSE(lines.empty());
+  const auto& last = lines.back();
+  // The learner held snapshots for the evaluator, and went on publishing to the actors on A.
+  EXPECT_GT(last.value("snapshots_held", 0), 0) << last.dump();
+  EXPECT_GT(last.value("snapshots_published", 0), 4) << last.dump();
+  std::printf(
+      "[figures] slow link: %lld snapshots published, %lld held for a reader, %lld "
+      "written after the hold ran out, %lld updates\n",
+      static_cast<long long>(last.value("snapshots_published", 0)),
+      static_cast<long long>(last.value("snapshots_held", 0)),
+      static_cast<long long>(last.value("snapshot_holds_expired", 0)),
+      static_cast<long long>(last.value("updates", 0)));
 }
 
 // Multicast is routed nowhere here, so only the discovery server (on A, at A's address, given

@@ -126,4 +126,25 @@ void HostPair::restore_link() {
   run_all(commands);
 }
 
+bool HostPair::limit_rate_a_to_b(const std::string& rate, std::string& why) {
+  std::string tc;
+  for (const char* path : {"/usr/sbin/tc", "/sbin/tc", "/usr/bin/tc", "/bin/tc"}) {
+    if (::access(path, X_OK) == 0) tc = path;
+  }
+  if (tc.empty()) {
+    why = "no tc (iproute2) to shape the link";
+    return false;
+  }
+  // A token bucket on A's end: `rate` on average, bursts of 64 KB (one DDS fragment), and a
+  // queue of at most 200 ms, beyond which packets are dropped as on a congested link.
+  const std::string command = tc + " -n " + ns_a_ + " qdisc replace dev " + kLinkA +
+                              " root tbf rate " + rate + " burst 64kb latency 200ms";
+  std::string output;
+  if (run_command(command, output) != 0) {
+    why = "'" + command + "' failed: " + output;
+    return false;
+  }
+  return true;
+}
+
 }  // namespace indrive::testing

@@ -50,6 +50,10 @@ class HostPair {
   void cut_link();
   void restore_link();
 
+  // Shapes what A sends to B to `rate` (tc's units, "8mbit"), as a slow link between hosts
+  // would; false with `why` set when tc is missing or refuses.
+  bool limit_rate_a_to_b(const std::string& rate, std::string& why);
+
  private:
   HostPair() = default;
   std::string ns_a_, ns_b_;

@@ -106,6 +106,10 @@ void declare_service_schema(config::Schema& schema) {
       .add_int("learner.allowance_slack", 64, "env steps actors may run ahead of training", 1)
       .add_int("learner.snapshot_every", 10, "updates between PolicySnapshots", 1)
       .add_float("learner.announce_s", 1.0, "seconds between SnapshotAnnounce messages", 0.05)
+      .add_float("learner.snapshot_hold_s", 10.0,
+                 "a due snapshot waits until every reader has the last one, at most this long "
+                 "(a reader gone keeps its match until its DDS lease ends)",
+                 0.0)
       .add_float("learner.log_interval_s", 5.0, "seconds between metrics lines", 0.1)
       .add_int("learner.log_every_env_steps", 1000,
                "also a metrics line each time the env steps pass a multiple of this (0: off), so "

@@ -37,7 +37,9 @@ class SnapshotInbox {
   // The kept snapshot if its version is above `version`, else nullptr (acting thread).
   std::shared_ptr<const msg::PolicySnapshot> take_newer_than(std::uint64_t version);
   // True when an announced version newer than `held_version` has been missing for longer than
-  // request_after_s and no request was made within that time; marks the request as made.
+  // request_after_s (counted from the first announce of a version newer than the snapshot held,
+  // or from the last snapshot received) and no request was made within that time; marks the
+  // request as made.
   bool should_request(std::uint64_t held_version, Clock::time_point now);
 
   // Snapshots dropped by validation, per reason.

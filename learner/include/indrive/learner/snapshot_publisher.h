@@ -4,10 +4,19 @@
 // SnapshotAnnounce that tells actors and evaluators the newest version and whether the run is
 // done.
 //
+// The snapshot writer keeps one sample (KEEP_LAST 1), so a new snapshot written while a reader
+// is still fetching the last one replaces it under that reader: on a link slower than the
+// learner publishes, the reader would never hold a whole snapshot. So a snapshot is written only
+// once every matched reader has acknowledged the last one, or when the last one has waited
+// `hold_s` (a reader that is gone keeps its match until its lease ends and must not stop the
+// others' snapshots for longer).
+//
 //   VersionReservation versions(run.checkpoints() / "policy_versions_reserved");
-//   SnapshotPublisher publisher(endpoints, run_id);
-//   versions.reserve(version);                      // before the version leaves the process
-//   publisher.publish(std::move(snapshot), done);   // sealed, written, announced
+//   SnapshotPublisher publisher(endpoints, run_id, hold_s);
+//   if (publisher.ready()) {                        // else: the snapshot is due, try again later
+//     versions.reserve(version);                    // before the version leaves the process
+//     publisher.publish(std::move(snapshot), done); // sealed, written, announced
+//   }
 //   if (publisher.take_request()) publisher.republish(done);
 #pragma once
 
@@ -49,15 +58,28 @@ class SnapshotPublisher {
  public:
   // Creates the snapshot and announce writers and the request reader on `endpoints`, which must
   // outlive the publisher's use (the set tears them down).
-  SnapshotPublisher(dds::EndpointSet& endpoints, std::string run_id);
+  // hold_s: how long a written snapshot may wait for every reader's acknowledgment before the
+  // next one is written anyway.
+  SnapshotPublisher(dds::EndpointSet& endpoints, std::string run_id, double hold_s);
 
+  // Whether a new snapshot may be written now: none was written yet, every matched reader has
+  // acknowledged the last one, or it was written hold_s ago or more.
+  bool ready() const;
+  // Whether every matched reader has acknowledged every snapshot written (true before the first).
+  bool delivered() const;
   // Seals and writes `snapshot` (its version and contents filled in), keeps it as the newest and
-  // announces it.
+  // announces it, whether or not ready() (the final snapshot of a run does not wait).
   void publish(msg::PolicySnapshot snapshot, bool done);
   // Announces the newest snapshot (nothing before the first).
   void announce(bool done);
-  // Writes the newest snapshot again and announces it; false when there is none yet.
+  // Writes the newest snapshot again and announces it; false when there is none yet, or when
+  // the last write is still on its way to some reader (!ready()): writing it again would start
+  // that reader over, and the sample on its way reaches every matched reader, the asker too.
   bool republish(bool done);
+  // Waits up to `timeout` until every matched reader has acknowledged the newest snapshot.
+  bool wait_until_delivered(std::chrono::milliseconds timeout);
+  // Seconds since the newest snapshot was written (very many before the first).
+  double seconds_since_write() const;
   // The last announce, written reliably: waits (up to 5 s) until every matched reader has it,
   // since the heartbeat's "done" is best effort and can be lost as the process exits.
   void announce_final(bool done);
@@ -74,6 +96,8 @@ class SnapshotPublisher {
   dds::Writer<msg::SnapshotAnnounce>& announce_writer_;
   std::atomic<bool> requested_{false};
   std::optional<msg::PolicySnapshot> newest_;
+  std::chrono::steady_clock::duration hold_;
+  std::chrono::steady_clock::time_point last_write_{};
   std::chrono::steady_clock::time_point last_announce_{};  // the epoch: due at once
 };
 

@@ -146,7 +146,7 @@ class Writer {
   bool wait_for_matched(int count, std::chrono::milliseconds timeout) const;
 
   // Waits until every matched reliable reader acknowledged every sample; false on timeout.
-  bool wait_for_acknowledgments(std::chrono::milliseconds timeout) {
+  bool wait_for_acknowledgments(std::chrono::milliseconds timeout) const {
     return writer_->wait_for_acknowledgments(to_duration(timeout)) ==
            eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK;
   }
