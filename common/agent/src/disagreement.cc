@@ -14,7 +14,8 @@ using namespace intrinsic_math;
 
 LatentDisagreement::LatentDisagreement(const IntrinsicConfig& config, const WorldModelConfig& model,
                                        nn::Rng& rng)
-    : IntrinsicModule(config), classes_(model.classes) {
+    : IntrinsicModule(config), classes_(model.classes), units_(config.units) {
+  INDRIVE_CHECK(config.layers >= 1) << "the disagreement ensemble needs a hidden layer";
   for (int k = 0; k < config.ensemble; ++k) {
     members_.emplace_back(
         params_, "ld.member" + std::to_string(k), model.feat_dim() + kNumActions,
@@ -24,11 +25,37 @@ LatentDisagreement::LatentDisagreement(const IntrinsicConfig& config, const Worl
   make_optimizer();
 }
 
-Tensor LatentDisagreement::predict(int k, Tensor input) {
-  Tensor logits = members_[k](input);
+Tensor LatentDisagreement::probabilities(Tensor logits) const {
   const std::int64_t n = logits.dim(0), s = logits.dim(1);
   Tensor probs = nn::softmax(nn::reshape(logits, Shape{n * s / classes_, classes_}));
   return nn::reshape(probs, Shape{n, s});
+}
+
+Tensor LatentDisagreement::predict(int k, Tensor input) {
+  return probabilities(members_[k](input));
+}
+
+Tensor LatentDisagreement::stacked_first_weights() {
+  std::vector<Tensor> weights;
+  for (const nn::Mlp& member : members_) {
+    INDRIVE_CHECK(!member.first_bias().defined()) << "ensemble members' first layers have no bias";
+    weights.push_back(member.first_weight());
+  }
+  return nn::concat(weights, 1);
+}
+
+std::vector<Tensor> LatentDisagreement::all_logits(Tensor input, Tensor stacked) {
+  // One (N, in) x (in, K * units) product instead of K products of (in, units): the GEMM is K
+  // times wider, which suits the kernels better than K narrow ones (and is one call, not K).
+  Tensor first = nn::matmul(input, stacked);
+  std::vector<Tensor> logits;
+  logits.reserve(members_.size());
+  for (int k = 0; k < members(); ++k) {
+    logits.push_back(
+        members_[k].after_first(nn::slice(first, static_cast<std::int64_t>(k) * units_,
+                                          static_cast<std::int64_t>(k + 1) * units_, 1)));
+  }
+  return logits;
 }
 
 Tensor LatentDisagreement::loss(const Transitions& batch) {
@@ -36,8 +63,9 @@ Tensor LatentDisagreement::loss(const Transitions& batch) {
   const std::int64_t n = input.dim(0), s = batch.next_post.dim(1);
   Tensor target = nn::reshape(batch.next_post, Shape{n * s / classes_, classes_});
   Tensor total;
+  const std::vector<Tensor> member_logits = all_logits(input, stacked_first_weights());
   for (int k = 0; k < members(); ++k) {
-    Tensor logits = members_[k](input);
+    const Tensor& logits = member_logits[k];
     Tensor logp = nn::log_softmax(nn::reshape(logits, Shape{n * s / classes_, classes_}));
     // Cross-entropy to the next posterior, summed over the latent groups.
     Tensor ce = nn::scale(row_sum(nn::reshape(nn::mul(target, logp), Shape{n, s})), -1.0f);
@@ -61,11 +89,13 @@ std::vector<float> LatentDisagreement::reward(Tensor feat, Tensor action, Tensor
   std::vector<float> mean, var;
   const float inv_k = 1.0f / static_cast<float>(members());
   std::vector<Tensor> preds(members());
+  const Tensor stacked = stacked_first_weights();  // before the mark: kept for every chunk
   for (std::int64_t r0 = 0; r0 < n; r0 += kChunkRows) {
     const std::int64_t r1 = std::min(n, r0 + kChunkRows);
     const nn::Graph::Mark mark = graph.mark();
     Tensor input = nn::concat({nn::slice(feat, r0, r1, 0), nn::slice(action, r0, r1, 0)}, -1);
-    for (int k = 0; k < members(); ++k) preds[k] = predict(k, input);
+    std::vector<Tensor> logits = all_logits(input, stacked);
+    for (int k = 0; k < members(); ++k) preds[k] = probabilities(logits[k]);
     const std::int64_t s = preds[0].dim(1);
     mean.resize(s);
     var.resize(s);

@@ -55,6 +55,13 @@ Tensor Linear::operator()(Tensor x) const {
   return linear(x, w_->tensor(), b_ ? b_->tensor() : Tensor());
 }
 
+Tensor Linear::weight() const {
+  INDRIVE_CHECK(w_ != nullptr) << "Linear used before construction";
+  return w_->tensor();
+}
+
+Tensor Linear::bias() const { return b_ ? b_->tensor() : Tensor(); }
+
 // ---- LayerNorm ----
 
 LayerNorm::LayerNorm(ParamGroup& group, const std::string& name, int dim, float eps) : eps_(eps) {
@@ -91,8 +98,24 @@ Mlp::Mlp(ParamGroup& group, const std::string& name, int in, MlpOptions options,
 }
 
 Tensor Mlp::operator()(Tensor x) const {
+  if (hidden_.empty()) return options_.out > 0 ? out_(x) : x;
+  return after_first(hidden_[0](x));
+}
+
+Tensor Mlp::first_weight() const {
+  INDRIVE_CHECK(!hidden_.empty()) << "an MLP without hidden layers has no first product";
+  return hidden_[0].weight();
+}
+
+Tensor Mlp::first_bias() const {
+  INDRIVE_CHECK(!hidden_.empty()) << "an MLP without hidden layers has no first product";
+  return hidden_[0].bias();
+}
+
+Tensor Mlp::after_first(Tensor x) const {
+  INDRIVE_CHECK(!hidden_.empty()) << "an MLP without hidden layers has no first product";
   for (std::size_t i = 0; i < hidden_.size(); ++i) {
-    x = hidden_[i](x);
+    if (i > 0) x = hidden_[i](x);
     x = options_.norm ? norms_[i](x, options_.act) : activate(x, options_.act);
   }
   if (options_.out > 0) x = out_(x);

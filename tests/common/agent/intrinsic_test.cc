@@ -10,6 +10,7 @@
 #include "indrive/agent/icm.h"
 #include "indrive/agent/rnd.h"
 #include "indrive/agent/world_model.h"
+#include "indrive/nn/kernels.h"
 
 namespace indrive::agent {
 namespace {
@@ -168,6 +169,78 @@ TEST(LatentDisagreement, RewardIsTheScaledMeanVarianceAcrossMembers) {
   EXPECT_GT(var_reward[1], 0.0f);
   EXPECT_NEAR(ld_std.last_raw_reward(), (std_reward[0] + std_reward[1]) / (2 * scale), 1e-6);
   EXPECT_NEAR(ld_std.last_raw_std(), std::abs(std_reward[0] - std_reward[1]) / (2 * scale), 1e-6);
+}
+
+// The K members' first products are made as one GEMM of their weights side by side: the loss
+// and every gradient must be those of the members run one by one (fp32; the sums' order differs,
+// so within float rounding, not bitwise).
+TEST(LatentDisagreement, OneProductForEveryMemberGivesTheMembersOwnLossAndGradients) {
+  const nn::Precision before = nn::precision();
+  nn::set_precision(nn::Precision::kFp32);
+  nn::Rng rng(9);
+  const WorldModelConfig model = preset("tiny").world_model;
+  LatentDisagreement ld(small_intrinsic(Method::kDisag), model, rng);
+  const int n = 24;
+  nn::current_graph().reset();
+  const Tensor feat_t = random_tensor(Shape{n, model.feat_dim()}, rng);
+  const Tensor post_t = random_latents(n, model, rng);
+  const std::vector<float> feat(feat_t.values().begin(), feat_t.values().end());
+  const std::vector<float> post(post_t.values().begin(), post_t.values().end());
+  const std::vector<int> actions = random_actions(n, rng);
+  // Each backward pass in a graph of its own, as in training.
+  auto transitions = [&] {
+    nn::current_graph().reset();
+    Transitions tr;
+    tr.feat = nn::constant(Shape{n, model.feat_dim()}, feat);
+    tr.next_feat = tr.feat;
+    tr.next_post = nn::constant(Shape{n, model.stoch_dim()}, post);
+    tr.action = WorldModel::one_hot(actions);
+    tr.mask = nn::full(Shape{n, 1}, 1.0f);
+    return tr;
+  };
+  auto gradients = [&] {
+    std::vector<std::vector<float>> grads;
+    for (const auto& p : ld.params().params())
+      grads.emplace_back(p->grad().begin(), p->grad().end());
+    return grads;
+  };
+
+  Transitions tr = transitions();
+  ld.params().zero_grad();
+  Tensor fused_total = ld.loss(tr);
+  const float fused_loss = fused_total.item();
+  nn::current_graph().backward(fused_total);
+  const auto fused = gradients();
+
+  // The same loss member by member: cross-entropy of each member's softmax to the next
+  // posterior, summed over latent groups, averaged over rows, summed over members.
+  tr = transitions();
+  ld.params().zero_grad();
+  Tensor input = nn::concat({tr.feat, tr.action}, -1);
+  Tensor total;
+  for (int k = 0; k < ld.members(); ++k) {
+    Tensor ce = nn::mul(tr.next_post, nn::log(ld.predict(k, input)));
+    Tensor member_loss = nn::scale(nn::sum(ce), -1.0f / n);
+    total = total.defined() ? nn::add(total, member_loss) : member_loss;
+  }
+  const float separate_loss = total.item();
+  nn::current_graph().backward(total);
+  const auto separate = gradients();
+
+  EXPECT_NEAR(fused_loss, separate_loss, 1e-4f * std::abs(separate_loss));
+  ASSERT_EQ(fused.size(), separate.size());
+  int compared = 0;
+  for (std::size_t i = 0; i < fused.size(); ++i) {
+    double norm = 0;
+    for (float g : separate[i]) norm = std::max(norm, static_cast<double>(std::abs(g)));
+    for (std::size_t j = 0; j < fused[i].size(); ++j) {
+      ASSERT_NEAR(fused[i][j], separate[i][j], 1e-4 * norm + 1e-7)
+          << ld.params().params()[i]->name() << "[" << j << "]";
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 100000) << "every member's parameters are compared";
+  nn::set_precision(before);
 }
 
 TEST(Icm, ForwardErrorRewardIsHigherOnUnseenTransitions) {

@@ -18,10 +18,20 @@ class LatentDisagreement : public IntrinsicModule {
   std::vector<float> reward(nn::Tensor feat, nn::Tensor action, nn::Tensor next_feat) override;
   // Predicted next-latent probabilities of member k: input (N, feat + 9), result (N, S).
   nn::Tensor predict(int k, nn::Tensor input);
+  // Every member's next-latent logits for one input (N, feat + 9), each (N, S): the members'
+  // first products, which share the input, as one GEMM with their weights side by side
+  // (`stacked`, from stacked_first_weights()), the rest member by member.
+  std::vector<nn::Tensor> all_logits(nn::Tensor input, nn::Tensor stacked);
+  // The members' first-layer weights side by side, (feat + 9, K * units).
+  nn::Tensor stacked_first_weights();
   int members() const { return static_cast<int>(members_.size()); }
 
  private:
+  // Per latent group, the softmax of (N, S) logits.
+  nn::Tensor probabilities(nn::Tensor logits) const;
+
   int classes_;
+  int units_;
   std::vector<nn::Mlp> members_;
 };
 

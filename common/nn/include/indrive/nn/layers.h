@@ -46,6 +46,8 @@ class Linear {
   Tensor operator()(Tensor x) const;
   int in() const { return in_; }
   int out() const { return out_; }
+  Tensor weight() const;
+  Tensor bias() const;  // undefined without a bias
 
  private:
   int in_ = 0, out_ = 0;
@@ -91,6 +93,15 @@ class Mlp {
   // x is (..., in); result is (..., out_dim()).
   Tensor operator()(Tensor x) const;
   int out_dim() const;
+
+  // The MLP split after its first product, so that several MLPs reading the same input can
+  // make their first products as one GEMM (a Linear of the weights side by side, see
+  // LatentDisagreement): first_weight() is the first hidden layer's (in, units) weight and
+  // first_bias() its bias (undefined without one); after_first(x @ first_weight() + bias) is
+  // operator()(x). Needs at least one hidden layer.
+  Tensor first_weight() const;
+  Tensor first_bias() const;
+  Tensor after_first(Tensor first_product) const;
 
  private:
   MlpOptions options_;
