@@ -1,5 +1,6 @@
 // LayerNorm, softmax and log-softmax over the last axis.
 #include <cmath>
+#include <type_traits>
 #include <vector>
 
 #include "indrive/nn/ops.h"
@@ -15,6 +16,16 @@ namespace {
 // Rows per chunk of the LayerNorm loops: fixed, so the parallel split (and the order in which
 // the per-chunk scale/offset gradients are summed) does not depend on the thread count.
 constexpr std::int64_t kNormChunkRows = 512;
+
+// Calls fn(std::integral_constant<int, W>{}) with W the first of `Widths` equal to cols, else
+// with W = Eigen::Dynamic: rows of a common width get a kernel of fixed size, so that Eigen
+// vectorises even rows shorter than one vector (a dynamic row that short stays scalar).
+template <int... Widths, typename Fn>
+void with_row_width(std::int64_t cols, Fn&& fn) {
+  const bool fixed =
+      ((cols == Widths ? (fn(std::integral_constant<int, Widths>{}), true) : false) || ...);
+  if (!fixed) fn(std::integral_constant<int, Eigen::Dynamic>{});
+}
 
 // Calls fn(row_begin, row_end, chunk) over chunks of rows, in parallel when large.
 template <typename Fn>
@@ -174,21 +185,10 @@ Tensor layer_norm_impl(Tensor x, Tensor gamma, Tensor beta, float eps, bool with
   const float* xv = x.data();
   float* y = n->value;
   for_row_chunks(rows, cols, [&](std::int64_t r0, std::int64_t r1, std::int64_t) {
-    // Rows of the common widths get a fixed-size kernel, so that Eigen vectorises even rows
-    // shorter than a full vector (the convolutions' 8-32 channels per pixel).
-    switch (cols) {
-      case 8:
-        normalize_rows<8>(xv, y, mean, rstd, gam, bet, r0, r1, cols, eps);
-        break;
-      case 16:
-        normalize_rows<16>(xv, y, mean, rstd, gam, bet, r0, r1, cols, eps);
-        break;
-      case 32:
-        normalize_rows<32>(xv, y, mean, rstd, gam, bet, r0, r1, cols, eps);
-        break;
-      default:
-        normalize_rows<Eigen::Dynamic>(xv, y, mean, rstd, gam, bet, r0, r1, cols, eps);
-    }
+    // The convolutions' 8-32 channels per pixel get fixed-size kernels.
+    with_row_width<8, 16, 32>(cols, [&](auto width) {
+      normalize_rows<decltype(width)::value>(xv, y, mean, rstd, gam, bet, r0, r1, cols, eps);
+    });
     // SiLU over the whole chunk at once: per row it would be scalar wherever a row is shorter
     // than a vector (the encoder's and decoder's 8-32 channels per pixel).
     if (with_silu) {
@@ -286,17 +286,10 @@ void softmax_row_range(const float* x, float* y, std::int64_t r0, std::int64_t r
 
 void softmax_rows(const float* x, float* y, std::int64_t rows, std::int64_t cols, bool log) {
   for_rows(rows, cols, [&](std::int64_t r0, std::int64_t r1) {
-    // The latents' 16 and 32 classes get a fixed-size kernel (one or two vectors per row).
-    switch (cols) {
-      case 16:
-        softmax_row_range<16>(x, y, r0, r1, cols, log);
-        break;
-      case 32:
-        softmax_row_range<32>(x, y, r0, r1, cols, log);
-        break;
-      default:
-        softmax_row_range<Eigen::Dynamic>(x, y, r0, r1, cols, log);
-    }
+    // The latents' 16 and 32 classes get fixed-size kernels (one or two vectors per row).
+    with_row_width<16, 32>(cols, [&](auto width) {
+      softmax_row_range<decltype(width)::value>(x, y, r0, r1, cols, log);
+    });
   });
 }
 
