@@ -121,6 +121,30 @@ TEST(DdsParticipant, LateReaderGetsTransientLocalAllowance) {
   EXPECT_EQ(samples.load(), 1);
 }
 
+// dds.snapshot_rate_mb_s replaces the policy writer's throughput limit (and only its); a
+// negative rate is refused with the key's name.
+TEST(DdsParticipant, SnapshotRateReplacesThePolicyWritersLimitOnly) {
+  const int domain = testing::unique_domain_id();
+  Participant shipped({.domain_id = domain, .profiles_file = profiles()});
+  auto shipped_policy = shipped.make_writer<msg::PolicySnapshot>();
+  EXPECT_EQ(shipped_policy->native()->get_qos().throughput_controller().bytesPerPeriod, 1048576u)
+      << "the shipped profile's 100 MB/s";
+
+  Participant slow({.domain_id = domain, .profiles_file = profiles(), .snapshot_rate_mb_s = 1.6});
+  auto policy = slow.make_writer<msg::PolicySnapshot>();
+  const auto& limit = policy->native()->get_qos().throughput_controller();
+  EXPECT_EQ(limit.bytesPerPeriod, 16000u) << "1.6 MB/s as bytes per 10 ms";
+  EXPECT_EQ(limit.periodMillisecs, 10u);
+  auto chunks = slow.make_writer<msg::TrajectoryChunk>();
+  EXPECT_NE(chunks->native()->get_qos().throughput_controller().bytesPerPeriod, 16000u);
+
+  EXPECT_NE(
+      error_of([&] {
+        Participant({.domain_id = domain, .profiles_file = profiles(), .snapshot_rate_mb_s = -1.0});
+      }).find("dds.snapshot_rate_mb_s"),
+      std::string::npos);
+}
+
 TEST(DdsParticipant, ThrowingCallbackIsCountedNotPropagated) {
   const int domain = testing::unique_domain_id();
   Participant participant({.domain_id = domain, .profiles_file = profiles()});

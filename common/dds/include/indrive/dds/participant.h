@@ -76,6 +76,10 @@ struct ParticipantOptions {
   std::string security_dir{};
   // Role whose certificate and permissions the participant uses with security_dir.
   std::string security_role{};
+  // Throughput limit of the policy snapshot writer in MB/s, replacing the profile's (its
+  // <throughputController>); 0 keeps the profile's. Below the rate of the slowest link that
+  // snapshots cross: faster bursts overflow that link's queue and no snapshot arrives whole.
+  double snapshot_rate_mb_s = 0.0;
 };
 
 // A discovery server's address: `host` as given, `ipv4` the address it resolved to, and
@@ -292,6 +296,7 @@ class Participant {
       eprosima::fastdds::dds::DataReaderListener* listener);
 
   std::filesystem::path profiles_file_;
+  double snapshot_rate_mb_s_ = 0.0;
   int domain_id_ = 0;
   bool uses_shared_memory_ = false;
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
