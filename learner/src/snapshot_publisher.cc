@@ -78,11 +78,6 @@ bool SnapshotPublisher::wait_until_delivered(std::chrono::milliseconds timeout) 
   return snapshot_writer_.wait_for_acknowledgments(timeout);
 }
 
-double SnapshotPublisher::seconds_since_write() const {
-  if (!newest_) return 1e9;
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - last_write_).count();
-}
-
 void SnapshotPublisher::announce(bool done) {
   if (!newest_) return;
   msg::SnapshotAnnounce message;

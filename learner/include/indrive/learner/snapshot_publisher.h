@@ -78,8 +78,6 @@ class SnapshotPublisher {
   bool republish(bool done);
   // Waits up to `timeout` until every matched reader has acknowledged the newest snapshot.
   bool wait_until_delivered(std::chrono::milliseconds timeout);
-  // Seconds since the newest snapshot was written (very many before the first).
-  double seconds_since_write() const;
   // The last announce, written reliably: waits (up to 5 s) until every matched reader has it,
   // since the heartbeat's "done" is best effort and can be lost as the process exits.
   void announce_final(bool done);
