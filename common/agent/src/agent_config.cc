@@ -202,6 +202,9 @@ void validate(const AgentConfig& config) {
   const IntrinsicConfig& in = config.intrinsic;
   require(in.ensemble >= 2, "intrinsic.ensemble must be >= 2 to measure disagreement");
   require(in.units > 0 && in.layers >= 0 && in.rnd_embed > 0, "intrinsic sizes must be positive");
+  require(in.method != Method::kDisag || in.layers >= 1,
+          "intrinsic.layers must be >= 1 for disag: the ensemble members share their first "
+          "hidden layer's product");
   require(in_unit_interval(in.norm_rate), "intrinsic.norm_rate must be in (0, 1]");
   require(in.norm_eps > 0.0f, "intrinsic.norm_eps must be > 0");
   require(in.disag_scale > 0.0f && in.icm_scale > 0.0f && in.rnd_scale > 0.0f,

@@ -66,6 +66,18 @@ TEST(AgentConfig, BadInputThrowsTypedErrors) {
   EXPECT_THROW(set_config_value(c, "intrinsic.method", "curiosity"), AgentConfigError);
   set_config_value(c, "world_model.image", "48");
   EXPECT_THROW(validate(c), AgentConfigError);
+  // The disagreement ensemble makes its members' first hidden products as one GEMM: a config
+  // without a hidden layer is refused by name, not left to fail inside the module.
+  AgentConfig no_hidden = preset("tiny");
+  set_config_value(no_hidden, "intrinsic.layers", "0");
+  try {
+    validate(no_hidden);
+    ADD_FAILURE() << "intrinsic.layers 0 with disag was accepted";
+  } catch (const AgentConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("intrinsic.layers"), std::string::npos) << e.what();
+  }
+  set_config_value(no_hidden, "intrinsic.method", "rnd");
+  EXPECT_NO_THROW(validate(no_hidden)) << "RND's networks may have no hidden layer";
   try {
     preset("huge");
   } catch (const AgentConfigError& e) {
