@@ -4,7 +4,9 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <sstream>
 
+#include "indrive/agent/policy.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/checksum.h"
 #include "indrive/basics/run_dir.h"
@@ -220,6 +222,26 @@ SnapshotFile read_snapshot_file(const std::filesystem::path& path) {
   }
 }
 
+namespace {
+
+// Writes format kSnapshotFileFormat: prefix, header text, header CRC, blob.
+void write_file(const std::filesystem::path& path, const std::string& header,
+                std::span<const std::uint8_t> blob) {
+  std::vector<std::uint8_t> bytes(kFilePrefix);
+  std::memcpy(bytes.data(), kFileMagic, sizeof(kFileMagic));
+  const std::uint32_t length = static_cast<std::uint32_t>(header.size());
+  std::memcpy(bytes.data() + sizeof(kFileMagic), &kSnapshotFileFormat, 4);
+  std::memcpy(bytes.data() + sizeof(kFileMagic) + 4, &length, 4);
+  bytes.insert(bytes.end(), header.begin(), header.end());
+  const std::uint32_t checksum = crc32(bytes.data(), bytes.size());
+  bytes.resize(bytes.size() + 4);
+  std::memcpy(bytes.data() + bytes.size() - 4, &checksum, 4);
+  bytes.insert(bytes.end(), blob.begin(), blob.end());
+  atomic_write(path, bytes);
+}
+
+}  // namespace
+
 void write_snapshot_file(const std::filesystem::path& path, std::span<const std::uint8_t> blob,
                          const agent::AgentConfig& architecture) {
   const std::vector<std::string> groups = snapshot_groups(blob);
@@ -236,17 +258,58 @@ void write_snapshot_file(const std::filesystem::path& path, std::span<const std:
     INDRIVE_CHECK(text.find('\n') == std::string::npos) << key << " holds a newline";
     header += key + "=" + text + "\n";
   }
-  std::vector<std::uint8_t> bytes(kFilePrefix);
-  std::memcpy(bytes.data(), kFileMagic, sizeof(kFileMagic));
-  const std::uint32_t length = static_cast<std::uint32_t>(header.size());
-  std::memcpy(bytes.data() + sizeof(kFileMagic), &kSnapshotFileFormat, 4);
-  std::memcpy(bytes.data() + sizeof(kFileMagic) + 4, &length, 4);
-  bytes.insert(bytes.end(), header.begin(), header.end());
-  const std::uint32_t checksum = crc32(bytes.data(), bytes.size());
-  bytes.resize(bytes.size() + 4);
-  std::memcpy(bytes.data() + bytes.size() - 4, &checksum, 4);
-  bytes.insert(bytes.end(), blob.begin(), blob.end());
-  atomic_write(path, bytes);
+  write_file(path, header, blob);
+}
+
+std::string describe_snapshot_file(const SnapshotFile& file) {
+  std::vector<nn::BlobGroup> groups;
+  try {
+    groups = nn::blob_contents(file.blob);
+  } catch (const nn::SerializationError& error) {
+    throw EvalError(std::string("snapshot: ") + error.what());
+  }
+  std::ostringstream out;
+  out << "format " << file.format
+      << (file.format == 0 ? " (a bare parameter blob: no architecture header)" : "") << "\n";
+  for (const auto& [key, value] : file.architecture) out << "  " << key << " = " << value << "\n";
+  std::size_t total_values = 0;
+  for (const nn::BlobGroup& group : groups) {
+    std::size_t values = 0, left_out = 0;
+    for (const nn::BlobParam& param : group.params) {
+      values += static_cast<std::size_t>(param.shape.numel());
+      if (!agent::snapshot_keeps(group.name, param.name)) ++left_out;
+    }
+    total_values += values;
+    out << "group " << group.name << ": " << group.params.size() << " parameters, " << values
+        << " values (" << values * sizeof(float) << " bytes)";
+    if (group.name == "world_model") {
+      out << (left_out == 0 ? "; what acting runs (encoder, RSSM)"
+                            : "; the whole world model: " + std::to_string(left_out) +
+                                  " parameters acting does not run (decoder, continuation "
+                                  "head); `indrive snapshot FILE --acting-only OUT` leaves "
+                                  "them out");
+    }
+    out << "\n";
+  }
+  out << "blob: " << file.blob.size() << " bytes, " << total_values << " values\n";
+  return out.str();
+}
+
+void write_acting_snapshot_file(const std::filesystem::path& path, const SnapshotFile& file) {
+  if (file.format == 0) {
+    throw EvalError(
+        "a format-0 snapshot (bare blob) has no architecture header to keep: evaluate it with "
+        "--set preset=NAME, and the evaluator saves it again as a file of the current format");
+  }
+  std::string header;
+  for (const auto& [key, value] : file.architecture) header += key + "=" + value + "\n";
+  std::vector<std::uint8_t> blob;
+  try {
+    blob = nn::filter_blob(file.blob, agent::snapshot_keeps);
+  } catch (const nn::SerializationError& error) {
+    throw EvalError(std::string("snapshot: ") + error.what());
+  }
+  write_file(path, header, blob);
 }
 
 std::string adopt_snapshot_architecture(agent::AgentConfig& config, const SnapshotFile& file,

@@ -13,6 +13,7 @@
 #include <string>
 #include <thread>
 
+#include "indrive/actor/snapshot_file.h"
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
@@ -275,6 +276,21 @@ int main(int argc, char** argv) {
   dashboard_cmd->add_option("--heldout-town", dashboard.heldout_town, "held-out town for the gap")
       ->capture_default_str();
 
+  fs::path snapshot_file;
+  fs::path snapshot_acting_out;
+  auto* snapshot_cmd = app.add_subcommand(
+      "snapshot",
+      "say what a snapshot file holds (architecture, groups, sizes); with --acting-only, write "
+      "it without the parameters acting does not run (an older file of the whole world model)");
+  snapshot_cmd
+      ->add_option("file", snapshot_file,
+                   "snapshot file (<run>/snapshot.params, "
+                   "<run>/eval/snapshot-v<N>.params)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  snapshot_cmd->add_option("--acting-only", snapshot_acting_out,
+                           "write the file with only what acting runs (encoder, RSSM, actor) here");
+
   CLI11_PARSE(app, argc, argv);
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
@@ -334,6 +350,19 @@ int main(int argc, char** argv) {
         std::printf("  %-40s %s %.6g: %.6g", end.label.c_str(), plot_x.c_str(), end.x, end.y);
         if (end.low != end.high) std::printf(" (%.6g to %.6g)", end.low, end.high);
         std::printf("\n");
+      }
+      return 0;
+    }
+    if (*snapshot_cmd) {
+      const auto file = indrive::actor::read_snapshot_file(snapshot_file);
+      std::printf("%s: %s", snapshot_file.c_str(),
+                  indrive::actor::describe_snapshot_file(file).c_str());
+      if (!snapshot_acting_out.empty()) {
+        indrive::actor::write_acting_snapshot_file(snapshot_acting_out, file);
+        std::printf("%s: %s", snapshot_acting_out.c_str(),
+                    indrive::actor::describe_snapshot_file(
+                        indrive::actor::read_snapshot_file(snapshot_acting_out))
+                        .c_str());
       }
       return 0;
     }

@@ -219,6 +219,43 @@ TEST(SnapshotFile, ChosenSizesThatDifferFromTheFileAreAClearError) {
   EXPECT_NE(note.find("as configured"), std::string::npos) << note;
 }
 
+// A file of the whole world model (as written before snapshots left the decoder out) is said to
+// be one, and is rewritten with what acting runs: the header kept, the blob the one that
+// Agent::snapshot() gives now.
+TEST(SnapshotFile, AnOlderWholeWorldModelFileIsRewrittenWithWhatActingRuns) {
+  testing::TempDir dir;
+  agent::AgentConfig tiny = agent::preset("tiny");
+  agent::Agent agent(tiny);
+  const nn::ParamGroup* whole_groups[] = {&agent.world_model().params(),
+                                          &agent.exploration().actor_params()};
+  const auto whole = nn::save_params(whole_groups);
+  const auto old_path = dir.path() / "old.params";
+  write_snapshot_file(old_path, whole, tiny);
+  const SnapshotFile old_file = read_snapshot_file(old_path);
+  const std::string old_text = describe_snapshot_file(old_file);
+  EXPECT_NE(old_text.find("preset = tiny"), std::string::npos) << old_text;
+  EXPECT_NE(old_text.find("the whole world model: 18 parameters acting does not run"),
+            std::string::npos)
+      << old_text;
+  EXPECT_NE(old_text.find("--acting-only"), std::string::npos) << old_text;
+
+  const auto new_path = dir.path() / "acting.params";
+  write_acting_snapshot_file(new_path, old_file);
+  const SnapshotFile acting = read_snapshot_file(new_path);
+  EXPECT_EQ(acting.architecture, old_file.architecture);
+  EXPECT_EQ(acting.blob, agent.snapshot());
+  EXPECT_LT(std::filesystem::file_size(new_path), std::filesystem::file_size(old_path) * 6 / 10);
+  const std::string text = describe_snapshot_file(acting);
+  EXPECT_NE(text.find("what acting runs (encoder, RSSM)"), std::string::npos) << text;
+  EXPECT_NE(text.find("group expl_actor: 8 parameters"), std::string::npos) << text;
+
+  // A bare blob has no header to keep: refused, saying what to do instead.
+  put_bytes(old_path, whole);
+  const std::string message =
+      eval_error_of([&] { write_acting_snapshot_file(new_path, read_snapshot_file(old_path)); });
+  EXPECT_NE(message.find("--set preset=NAME"), std::string::npos) << message;
+}
+
 TEST(SnapshotFile, SnapshotFileWithoutHeaderStillLoadsWithItsPreset) {
   testing::TempDir dir;
   const auto blob = tiny_snapshot(agent::Phase::kPretrain);

@@ -6,6 +6,9 @@
 #include <fstream>
 
 #include "child_process.h"
+#include "indrive/actor/snapshot_file.h"
+#include "indrive/agent/agent.h"
+#include "indrive/nn/serialize.h"
 #include "testing.h"
 
 namespace indrive {
@@ -125,6 +128,36 @@ TEST(IndriveDashboard, EndedTextOnAOneOffPageAndUntilEofNeedsWatch) {
   testing::Child bad({kIndrive.string(), "dashboard", run.string(), "--until-eof"}, bad_log);
   EXPECT_NE(bad.wait(30s), 0);
   EXPECT_NE(testing::slurp(bad_log).find("--watch"), std::string::npos) << testing::slurp(bad_log);
+}
+
+// `indrive snapshot FILE` prints what a file holds; --acting-only writes the slimmer form, which
+// the same command then describes; a missing file is refused by name.
+TEST(IndriveSnapshot, SaysWhatAFileHoldsAndWritesTheActingOnlyForm) {
+  testing::TempDir dir;
+  const agent::AgentConfig tiny = agent::preset("tiny");
+  agent::Agent agent(tiny);
+  const nn::ParamGroup* whole[] = {&agent.world_model().params(),
+                                   &agent.exploration().actor_params()};
+  const auto old_path = dir.path() / "old.params";
+  actor::write_snapshot_file(old_path, nn::save_params(whole), tiny);
+  const auto new_path = dir.path() / "acting.params";
+  const auto log = dir.path() / "snapshot.log";
+  testing::Child snapshot(
+      {kIndrive.string(), "snapshot", old_path.string(), "--acting-only", new_path.string()}, log);
+  ASSERT_EQ(snapshot.wait(30s), 0) << testing::slurp(log);
+  const std::string output = testing::slurp(log);
+  EXPECT_NE(output.find("phase = pretrain"), std::string::npos) << output;
+  EXPECT_NE(output.find("the whole world model"), std::string::npos) << output;
+  EXPECT_NE(output.find(new_path.string() + ": format 1"), std::string::npos) << output;
+  EXPECT_NE(output.find("what acting runs"), std::string::npos) << output;
+  EXPECT_EQ(actor::read_snapshot_file(new_path).blob, agent.snapshot());
+
+  const auto missing_log = dir.path() / "missing.log";
+  testing::Child missing({kIndrive.string(), "snapshot", (dir.path() / "none").string()},
+                         missing_log);
+  EXPECT_NE(missing.wait(30s), 0);
+  EXPECT_NE(testing::slurp(missing_log).find("none"), std::string::npos)
+      << testing::slurp(missing_log);
 }
 
 }  // namespace

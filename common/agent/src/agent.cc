@@ -5,6 +5,7 @@
 #include <fstream>
 #include <type_traits>
 
+#include "indrive/agent/policy.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/checksum.h"
 #include "indrive/basics/run_dir.h"
@@ -265,7 +266,7 @@ std::vector<std::uint8_t> Agent::snapshot() const {
   const nn::ParamGroup* actor =
       config_.phase == Phase::kPretrain ? &expl_->actor_params() : &task_->actor_params();
   const nn::ParamGroup* parts[2] = {&wm_->params(), actor};
-  return nn::save_params(std::span<const nn::ParamGroup* const>(parts, 2));
+  return nn::save_params(std::span<const nn::ParamGroup* const>(parts, 2), snapshot_keeps);
 }
 
 std::vector<nn::ParamGroup*> Agent::groups() {

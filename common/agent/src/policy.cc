@@ -14,6 +14,10 @@ std::string actor_group_name(Phase phase) {
 }
 }  // namespace
 
+bool snapshot_keeps(const std::string& group, const std::string& param) {
+  return group != "world_model" || WorldModel::acts_with(param);
+}
+
 Policy::Policy(const AgentConfig& config)
     : config_(config),
       rng_(config.seed ^ 0x9e3779b97f4a7c15ull),
@@ -30,7 +34,18 @@ Policy::Policy(const AgentConfig& config)
 
 void Policy::load_snapshot(std::span<const std::uint8_t> snapshot) {
   nn::ParamGroup* groups[2] = {&wm_->params(), &actor_params_};
-  nn::load_params(snapshot, std::span<nn::ParamGroup* const>(groups, 2));
+  const std::span<nn::ParamGroup* const> parts(groups, 2);
+  try {
+    nn::load_params(snapshot, parts, snapshot_keeps);
+  } catch (const nn::SerializationError& error) {
+    // A snapshot of the whole world model (written before snapshots left the decoder out)?
+    // Otherwise the error of the current form is the one that says what is wrong.
+    try {
+      nn::load_params(snapshot, parts);
+    } catch (const nn::SerializationError&) {
+      throw error;
+    }
+  }
   ++loaded_;
 }
 

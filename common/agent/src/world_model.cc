@@ -71,6 +71,10 @@ RssmState WorldModel::obs_step(const RssmState& prev, Tensor action, Tensor embe
   return {prior.deter, nn::sample_straight_through(probs, config_.classes, rng)};
 }
 
+bool WorldModel::acts_with(const std::string& param) {
+  return param.starts_with("enc.") || param.starts_with("rssm.");
+}
+
 Tensor WorldModel::encode(Tensor images) { return encoder_(nn::add_scalar(images, -0.5f)); }
 
 Tensor WorldModel::decode(Tensor features) { return nn::add_scalar(decoder_(features), 0.5f); }

@@ -23,6 +23,15 @@ std::uint32_t read_prelude(detail::ByteReader& r) {
   return r.u32();
 }
 
+// The parameters of a group that `keep` keeps (all when keep is empty), in the group's order.
+std::vector<Parameter*> kept_params(const ParamGroup& g, const ParamFilter& keep) {
+  std::vector<Parameter*> out;
+  out.reserve(g.params().size());
+  for (const auto& p : g.params())
+    if (!keep || keep(g.name(), p->name())) out.push_back(p.get());
+  return out;
+}
+
 // Reads a parameter's rank and dimensions, checked against what a Shape can hold.
 Shape read_shape(detail::ByteReader& r, const std::string& where) {
   const std::uint32_t rank = r.u32();
@@ -36,14 +45,20 @@ Shape read_shape(detail::ByteReader& r, const std::string& where) {
 }  // namespace
 
 std::vector<std::uint8_t> save_params(std::span<const ParamGroup* const> groups) {
+  return save_params(groups, nullptr);
+}
+
+std::vector<std::uint8_t> save_params(std::span<const ParamGroup* const> groups,
+                                      const ParamFilter& keep) {
   detail::ByteWriter w;
   w.u32(kMagic);
   w.u32(kVersion);
   w.u32(static_cast<std::uint32_t>(groups.size()));
   for (const ParamGroup* g : groups) {
+    const std::vector<Parameter*> params = kept_params(*g, keep);
     w.str(g->name());
-    w.u32(static_cast<std::uint32_t>(g->params().size()));
-    for (const auto& p : g->params()) {
+    w.u32(static_cast<std::uint32_t>(params.size()));
+    for (const Parameter* p : params) {
       w.str(p->name());
       w.u32(static_cast<std::uint32_t>(p->shape().rank));
       for (int d = 0; d < p->shape().rank; ++d) w.i64(p->shape().dims[d]);
@@ -59,6 +74,11 @@ std::vector<std::uint8_t> save_params(const ParamGroup& group) {
 }
 
 void load_params(std::span<const std::uint8_t> blob, std::span<ParamGroup* const> groups) {
+  load_params(blob, groups, nullptr);
+}
+
+void load_params(std::span<const std::uint8_t> blob, std::span<ParamGroup* const> groups,
+                 const ParamFilter& keep) {
   detail::ByteReader r(blob, "parameter blob");
   const std::uint32_t count = read_prelude(r);
   if (count != groups.size())
@@ -66,17 +86,20 @@ void load_params(std::span<const std::uint8_t> blob, std::span<ParamGroup* const
                              " groups, expected " + std::to_string(groups.size()));
   // Read everything into staging buffers first, so a failure leaves the groups unchanged.
   std::vector<std::vector<float>> staged;
-  for (const ParamGroup* g : groups) {
+  std::vector<Parameter*> targets;
+  for (ParamGroup* g : groups) {
     const std::string gname = r.str();
     if (gname != g->name())
       throw SerializationError("parameter blob: group '" + gname + "' where '" + g->name() +
                                "' was expected");
+    const std::vector<Parameter*> params = kept_params(*g, keep);
     const std::uint32_t n = r.u32();
-    if (n != g->params().size())
+    if (n != params.size())
       throw SerializationError("parameter blob: group '" + gname + "' has " + std::to_string(n) +
-                               " parameters, the model has " + std::to_string(g->params().size()) +
+                               " parameters, the model has " + std::to_string(params.size()) +
+                               (keep ? " to load" : "") +
                                "; the model architecture (preset) differs");
-    for (const auto& p : g->params()) {
+    for (Parameter* p : params) {
       const std::string pname = r.str();
       if (pname != p->name())
         throw SerializationError("parameter blob: group '" + gname + "' has parameter '" + pname +
@@ -88,16 +111,13 @@ void load_params(std::span<const std::uint8_t> blob, std::span<ParamGroup* const
                                  "; the model architecture (preset) differs");
       staged.emplace_back(static_cast<std::size_t>(p->numel()));
       r.floats(staged.back());
+      targets.push_back(p);
     }
   }
   if (!r.done())
     throw SerializationError("parameter blob: trailing bytes after the last parameter");
-  std::size_t i = 0;
-  for (ParamGroup* g : groups)
-    for (const auto& p : g->params()) {
-      std::copy(staged[i].begin(), staged[i].end(), p->value().begin());
-      ++i;
-    }
+  for (std::size_t i = 0; i < targets.size(); ++i)
+    std::copy(staged[i].begin(), staged[i].end(), targets[i]->value().begin());
 }
 
 void load_params(std::span<const std::uint8_t> blob, ParamGroup& group) {
@@ -142,6 +162,37 @@ std::vector<BlobGroup> blob_contents(std::span<const std::uint8_t> blob) {
   if (!r.done())
     throw SerializationError("parameter blob: trailing bytes after the last parameter");
   return groups;
+}
+
+std::vector<std::uint8_t> filter_blob(std::span<const std::uint8_t> blob, const ParamFilter& keep) {
+  const std::vector<BlobGroup> contents = blob_contents(blob);  // checks every size first
+  detail::ByteReader r(blob, "parameter blob");
+  read_prelude(r);
+  detail::ByteWriter w;
+  w.u32(kMagic);
+  w.u32(kVersion);
+  w.u32(static_cast<std::uint32_t>(contents.size()));
+  std::vector<float> values;
+  for (const BlobGroup& group : contents) {
+    r.str();
+    r.u32();
+    const auto kept = std::count_if(group.params.begin(), group.params.end(),
+                                    [&](const BlobParam& p) { return keep(group.name, p.name); });
+    w.str(group.name);
+    w.u32(static_cast<std::uint32_t>(kept));
+    for (const BlobParam& param : group.params) {
+      r.str();
+      read_shape(r, group.name + "/" + param.name);
+      values.resize(static_cast<std::size_t>(param.shape.numel()));
+      r.floats(values);
+      if (!keep(group.name, param.name)) continue;
+      w.str(param.name);
+      w.u32(static_cast<std::uint32_t>(param.shape.rank));
+      for (int d = 0; d < param.shape.rank; ++d) w.i64(param.shape.dims[d]);
+      w.floats(values);
+    }
+  }
+  return w.finish();
 }
 
 }  // namespace indrive::nn

@@ -282,6 +282,56 @@ TEST(Policy, ActsFromSnapshotBytesOnly) {
   EXPECT_THROW(mismatched.load_snapshot(agent.snapshot()), nn::SerializationError);
 }
 
+// Snapshots carry what acting runs: no decoder, no continuation head; a policy acts the same
+// from such a snapshot as from one of the whole world model (the form written before), which
+// still loads.
+TEST(Policy, SnapshotsLeaveOutWhatActingDoesNotRunAndOldWholeOnesStillLoad) {
+  nn::set_threads(1);
+  Agent agent(tiny_config());
+  ReplayBuffer replay = dot_replay(false);
+  agent.train_step(replay.sample(2, 8));
+  const std::vector<std::uint8_t> snapshot = agent.snapshot();
+  std::int64_t acting = 0, world_model = 0;
+  for (const nn::BlobGroup& group : nn::blob_contents(snapshot)) {
+    for (const nn::BlobParam& param : group.params) {
+      EXPECT_FALSE(param.name.starts_with("dec.") || param.name.starts_with("cont."))
+          << group.name << "/" << param.name;
+      if (group.name == "world_model") acting += param.shape.numel();
+    }
+  }
+  for (const auto& param : agent.world_model().params().params()) world_model += param->numel();
+  // tiny: encoder and RSSM are 309k of the world model's 583k parameters.
+  EXPECT_LT(acting, world_model * 6 / 10) << acting << " of " << world_model;
+
+  AgentConfig config = tiny_config();
+  config.eval_sample = false;
+  Policy slim(config), whole(config);
+  slim.load_snapshot(snapshot);
+  const nn::ParamGroup* parts[2] = {&agent.world_model().params(),
+                                    &agent.exploration().actor_params()};
+  whole.load_snapshot(nn::save_params(std::span<const nn::ParamGroup* const>(parts, 2)));
+  synthetic::DotEnv env(32, 3);
+  PolicyState a, b;
+  std::vector<std::uint8_t> frame = env.reset();
+  for (int t = 0; t < 10; ++t) {
+    const int action = slim.act(frame, t == 0, a, true);
+    ASSERT_EQ(whole.act(frame, t == 0, b, true), action) << "step " << t;
+    ASSERT_EQ(slim.last_probs(), whole.last_probs()) << "step " << t;
+    env.step(action);
+    frame = env.frame();
+  }
+  // A snapshot of another size is still refused, with the current form's message.
+  AgentConfig bigger = tiny_config();
+  bigger.world_model.deter = 64;
+  Policy mismatched(bigger);
+  try {
+    mismatched.load_snapshot(snapshot);
+    ADD_FAILURE() << "a snapshot of another size loaded";
+  } catch (const nn::SerializationError& error) {
+    EXPECT_NE(std::string(error.what()).find("rssm."), std::string::npos) << error.what();
+  }
+}
+
 TEST(Policy, ActsWithTheActorOfItsPhase) {
   nn::set_threads(1);
   Agent agent(tiny_config(Phase::kFinetune));

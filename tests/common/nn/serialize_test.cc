@@ -111,5 +111,39 @@ TEST(SerializeTest, ContentsNameGroupsParametersAndShapesWithoutLoading) {
   EXPECT_FALSE(starts_like_blob(std::span<const std::uint8_t>()));
 }
 
+// A filter keeps some parameters: the blob holds only those, loading sets only those, and a
+// blob of another form (all parameters) is refused by the filtered load with a count.
+TEST(SerializeTest, AFilterSavesAndLoadsOnlyTheParametersItKeeps) {
+  ParamGroup a("world_model"), b("world_model");
+  build(a, 8, 1);
+  build(b, 8, 2);
+  const ParamFilter keep = [](const std::string& group, const std::string& param) {
+    return group == "world_model" && param.starts_with("gru.");
+  };
+  const ParamGroup* out[] = {&a};
+  const auto blob = save_params(out, keep);
+  const std::vector<BlobGroup> contents = blob_contents(blob);
+  ASSERT_EQ(contents.size(), 1u);
+  ASSERT_FALSE(contents[0].params.empty());
+  for (const BlobParam& param : contents[0].params) EXPECT_TRUE(param.name.starts_with("gru."));
+  EXPECT_LT(blob.size(), save_params(a).size());
+
+  std::vector<std::vector<float>> before;
+  for (const auto& p : b.params()) before.emplace_back(p->value().begin(), p->value().end());
+  ParamGroup* in[] = {&b};
+  load_params(blob, in, keep);
+  for (std::size_t i = 0; i < b.params().size(); ++i) {
+    const auto& p = b.params()[i];
+    const std::vector<float> now(p->value().begin(), p->value().end());
+    const std::vector<float> from_a(a.params()[i]->value().begin(), a.params()[i]->value().end());
+    EXPECT_EQ(now, p->name().starts_with("gru.") ? from_a : before[i]) << p->name();
+  }
+  // Filtering the whole blob gives the same bytes as saving with the filter.
+  EXPECT_EQ(filter_blob(save_params(a), keep), blob);
+  // The unfiltered blob does not fit the filtered load, nor the filtered blob the plain one.
+  EXPECT_THROW(load_params(save_params(a), in, keep), SerializationError);
+  EXPECT_THROW(load_params(blob, b), SerializationError);
+}
+
 }  // namespace
 }  // namespace indrive::nn

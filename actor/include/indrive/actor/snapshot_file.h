@@ -1,6 +1,7 @@
 // Snapshot files: a snapshot on disk is a small architecture header followed by the parameter
-// blob of Agent::snapshot() (the bytes a PolicySnapshot carries in `params`: world model group,
-// then one actor group, "expl_actor" in pretraining or "task_actor" in finetune/dreamer, with a
+// blob of Agent::snapshot() (the bytes a PolicySnapshot carries in `params`: world model group
+// with what acting runs, encoder and RSSM (older files hold the whole world model), then one
+// actor group, "expl_actor" in pretraining or "task_actor" in finetune/dreamer, with a
 // trailing CRC-32). The DDS evaluator saves the snapshot it evaluates as
 // <run>/eval/snapshot-v<version>.params, so it can be evaluated again later without a learner
 // and without naming its preset: `indrive-actor --evaluate --snapshot FILE`.
@@ -78,6 +79,15 @@ SnapshotFile read_snapshot_file(const std::filesystem::path& path);
 void write_snapshot_file(const std::filesystem::path& path, std::span<const std::uint8_t> blob,
                          const agent::AgentConfig& architecture);
 
+// What a snapshot file holds, for a person: its format, its header (preset, phase, actor,
+// sizes), then per group the parameter count, values and bytes, and whether the world model is
+// the part acting runs (agent::snapshot_keeps) or the whole one of files written before.
+std::string describe_snapshot_file(const SnapshotFile& file);
+// Writes `file` with only what acting runs (agent::snapshot_keeps), header unchanged, values bit
+// for bit: what an older snapshot file of the whole world model becomes. Throws EvalError for a
+// format-0 file (no header to keep: evaluate it with --set preset=NAME and let the evaluator
+// save it again).
+void write_acting_snapshot_file(const std::filesystem::path& path, const SnapshotFile& file);
 // Sizes `config` by a snapshot file's header, as evaluating that file needs: every size key,
 // the preset name and the phase that `chosen` does not name are taken from the header.
 // `chosen`: the agent keys the configuration chose explicitly, each with where ("preset" ->

@@ -80,7 +80,8 @@ class Agent {
   // fields as last_timing, in FLOPs): what the benchmark divides by the seconds.
   const StepTiming& last_flops() const { return flops_; }
 
-  // Parameters actors need (world model and the acting actor), as a serialized blob.
+  // Parameters actors need (the world model's encoder and RSSM, and the acting actor), as a
+  // serialized blob (snapshot_keeps in policy.h says which).
   std::vector<std::uint8_t> snapshot() const;
   // Name of the actor group that acts in the current phase ("expl_actor" or "task_actor").
   std::string acting_actor_group() const;

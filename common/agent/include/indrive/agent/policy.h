@@ -20,6 +20,12 @@
 
 namespace indrive::agent {
 
+// Whether a policy snapshot (Agent::snapshot) carries a parameter: everything of the actor
+// groups, and of the world model what acting runs, the encoder and the RSSM
+// (WorldModel::acts_with). The decoder and the continuation head, 42% of a tiny world
+// model's parameters, serve only training and stay out of snapshots.
+bool snapshot_keeps(const std::string& group, const std::string& param);
+
 // Recurrent state an actor carries between steps (plain vectors: no graph tensors survive).
 struct PolicyState {
   std::vector<float> deter;  // (deter) h_t
@@ -34,7 +40,8 @@ class Policy {
   // pretrain and the task actor otherwise. Parameters stay random until load_snapshot.
   explicit Policy(const AgentConfig& config);
   // Loads parameters from Agent::snapshot() bytes; throws nn::SerializationError when the
-  // snapshot holds other groups or sizes, leaving the policy unchanged.
+  // snapshot holds other groups or sizes, leaving the policy unchanged. A snapshot written
+  // before snapshots left out what acting does not run (the whole world model) loads too.
   void load_snapshot(std::span<const std::uint8_t> snapshot);
   // Returns the action for `frame` ((H, W) class ids) and updates `state`. is_first starts an
   // episode (state and previous action are reset). With sample false the most likely action

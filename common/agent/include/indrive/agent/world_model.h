@@ -45,6 +45,9 @@ class WorldModel {
 
   const WorldModelConfig& config() const { return config_; }
   nn::ParamGroup& params() { return params_; }
+  // Whether acting (encode, obs_step, initial) uses a parameter of the "world_model" group:
+  // the encoder's and the RSSM's do; the decoder's and the continuation head's do not.
+  static bool acts_with(const std::string& param);
   nn::ParamGroup& reward_params() { return reward_params_; }
 
   // The learned initial state for n rows: h0 = tanh(w), s0 = the prior's mode at h0.
