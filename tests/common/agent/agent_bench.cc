@@ -225,6 +225,8 @@ int main(int argc, char** argv) {
                 config.behavior.horizon,
                 static_cast<long long>(agent.world_model().params().numel()),
                 static_cast<long long>(params));
+    // What every snapshot puts on the wire (the acting parameters only).
+    std::printf("snapshot_mb=%.2f\n", static_cast<double>(agent.snapshot().size()) / 1e6);
     std::printf("wm_update sec=%.3f cpu_sec=%.3f page_faults=%.0f frames_per_sec=%.0f\n", wm,
                 median(wm_samples.cpu), median(wm_samples.faults), frames / wm);
     std::printf(
