@@ -8,7 +8,7 @@
 #
 # `run` links the grid's pretraining (--grid, runs/paper-grid/s<seed>/pretrain-<method>, which
 # must be finished) into --out/r<ratio>/s<seed>/ and runs paper_grid.sh's fewshot stage there with
-# learner.replay_ratio set; both tasks unless --task is given. Resumable like the grid.
+# --fewshot-ratio set; both tasks unless --task is given. Resumable like the grid.
 # `table` prints, per seed, task and ratio: updates, the training measures over the last 10% of
 # task steps (episode return, steps per episode; town01's routes are the training routes), and
 # the average SR over routes and mean route completion on town01 and town02.
@@ -53,7 +53,7 @@ case $command in
     ln -sfn "$(cd "$pre" && pwd)" "$here/pretrain-$method"
     "$root/deploy/experiments/paper_grid.sh" chain --bin "$bin" --out "$out/r$ratio" --seed "$seed" \
       --method "$method" --stages fewshot ${task_args[@]+"${task_args[@]}"} \
-      --set "learner.replay_ratio=$ratio"
+      --fewshot-ratio "$ratio"
     ;;
   table)
     python3 - "$out" "$grid" <<'PY'

@@ -6,7 +6,9 @@
 #   zeroshot  that snapshot, every parameter frozen, on town01 and town02: all four routes,
 #             densities 5/10/20, --episodes per cell (indrive-actor --evaluate --snapshot);
 #   fewshot   lane following and collision avoidance fine-tuned from the pretraining for
-#             --task-steps on town01's routes, each evaluated like the zero-shot;
+#             --task-steps on town01's routes at replay ratio --fewshot-ratio (512, the public
+#             InDRiVE code's, chosen by docs/results/ablation-fewshot-ratio/'s rule; the
+#             method page's few-shot rows were made at 32), each evaluated like the zero-shot;
 #   dreamer   DreamerV3 from scratch on a task for the same total budget (pretrain + task
 #             steps), evaluated the same way;
 #   report    `indrive report` over every evaluation under --out (Tables III-VI, 95% CIs).
@@ -23,7 +25,7 @@
 # Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
 # --task-steps N (10000), --episodes N per town x route x density (5), --stages "pretrain
 # zeroshot fewshot" (a chain's stages), --task T (dreamer's task; a chain's fewshot then does
-# only T), --set KEY=VALUE for every training run (repeatable).
+# only T), --fewshot-ratio N (512), --set KEY=VALUE for every training run (repeatable).
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -32,6 +34,7 @@ out="$root/runs/paper-grid"
 preset=tiny
 pretrain_steps=100000
 task_steps=10000
+fewshot_ratio=512
 episodes=5
 seed=0
 method=disag
@@ -40,7 +43,7 @@ tasks="lane_following collision_avoidance"  # of a chain's fewshot stage; --task
 stages="pretrain zeroshot fewshot"
 extra=()
 
-usage() { sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -52,6 +55,7 @@ while [[ $# -gt 0 ]]; do
     --preset) preset=$2; shift 2 ;;
     --pretrain-steps) pretrain_steps=$2; shift 2 ;;
     --task-steps) task_steps=$2; shift 2 ;;
+    --fewshot-ratio) fewshot_ratio=$2; shift 2 ;;
     --episodes) episodes=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
     --method) method=$2; shift 2 ;;
@@ -140,8 +144,9 @@ case $command in
         ft="$seed_dir/finetune-$(short "$t")-$method"
         say "few-shot $t from $method seed $seed, $task_steps env steps"
         ckpt=$(ls "$pre"/checkpoints/ckpt-*.bin | sort -V | tail -n 1)
+        # agent.intrinsic.method: the checkpoint's module, not the config's.
         train "$ft" "$(config_of finetune "$t")" "$task_steps" --set "learner.init_checkpoint=$ckpt" \
-          --set "agent.intrinsic.method=$method"  # the checkpoint's module, not the config's
+          --set "agent.intrinsic.method=$method" --set "learner.replay_ratio=$fewshot_ratio"
         evaluate "$seed_dir/fewshot-$(short "$t")-$method" few_shot "$ft/snapshot.params" \
           --set "agent.intrinsic.method=$method" --set "agent.task=$t"
       done
