@@ -11,7 +11,10 @@
 #             method page's few-shot rows were made at 32), each evaluated like the zero-shot;
 #   dreamer   DreamerV3 from scratch on a task for the same total budget (pretrain + task
 #             steps), evaluated the same way;
-#   report    `indrive report` over every evaluation under --out (Tables III-VI, 95% CIs).
+#   report    `indrive report` over every evaluation under --out (Tables III-VI, 95% CIs);
+#   publish   what must outlast the machine, into a committed results page (--page DIR):
+#             metrics, configs, evaluation CSVs, the report, and the acting snapshots of the
+#             seeds in --snapshot-seeds ("0").
 # Every stage leaves a DONE file in its run directory and is skipped when it is there, so a
 # chain stopped midway resumes at its stage (a training run resumes from its checkpoints).
 #
@@ -20,12 +23,14 @@
 #   deploy/experiments/paper_grid.sh dreamer --seed 0 --task lane_following
 #   deploy/experiments/paper_grid.sh summary   # the pretraining measures, a markdown table
 #   deploy/experiments/paper_grid.sh report
+#   deploy/experiments/paper_grid.sh publish --page docs/results/grid-fewshot512
 # Two chains side by side on 2 cores: give each OMP_NUM_THREADS=1 (the script sets it and
 # OMP_WAIT_POLICY=passive unless they are set).
 # Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
 # --task-steps N (10000), --episodes N per town x route x density (5), --stages "pretrain
 # zeroshot fewshot" (a chain's stages), --task T (dreamer's task; a chain's fewshot then does
-# only T), --fewshot-ratio N (512), --set KEY=VALUE for every training run (repeatable).
+# only T), --fewshot-ratio N (512), --set KEY=VALUE for every training run (repeatable),
+# --page DIR and --snapshot-seeds "S ..." (publish).
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -42,8 +47,10 @@ task=lane_following
 tasks="lane_following collision_avoidance"  # of a chain's fewshot stage; --task picks one
 stages="pretrain zeroshot fewshot"
 extra=()
+page=""
+snapshot_seeds=0
 
-usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -62,6 +69,8 @@ while [[ $# -gt 0 ]]; do
     --task) task=$2; tasks=$2; shift 2 ;;
     --stages) stages=$2; shift 2 ;;
     --set) extra+=(--set "$2"); shift 2 ;;
+    --page) page=$2; shift 2 ;;
+    --snapshot-seeds) snapshot_seeds=$2; shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -187,10 +196,45 @@ for r in rows:
     print("| %s | %s | %d | %.2f | %.0f | %.1f | %.1f | %.2f | %.3g | %.3g |" % r)
 PY
     ;;
+  publish)
+    # Copies what must outlast the machine into a results page (--page DIR, committed): each
+    # finished training run's metrics.jsonl and config.yaml (paths made relative to the
+    # repository) under runs/s<seed>-<run>/, each finished evaluation's CSVs under
+    # eval/s<seed>-<evaluation>-evaluator-<j>.csv, the acting part of the final snapshot of every
+    # run of the seeds in --snapshot-seeds under snapshots/ (1.5 MB each on tiny), the pretraining
+    # summary, and `indrive report` over eval/. Runs and evaluations not finished (no DONE) are
+    # left out and named.
+    [[ -n $page ]] || { echo "publish needs --page DIR (a folder under docs/results/)" >&2; exit 2; }
+    mkdir -p "$page/runs" "$page/eval" "$page/snapshots"
+    for run in "$out"/s*/{pretrain,finetune,dreamer}-*; do
+      [[ -d $run ]] || continue
+      s=$(basename "$(dirname "$run")")
+      name="$s-$(basename "$run")"
+      if ! done_mark "$run"; then say "not finished, left out: $run"; continue; fi
+      mkdir -p "$page/runs/$name"
+      cp "$run/metrics.jsonl" "$page/runs/$name/"
+      sed "s#$root/##g" "$run/config.yaml" > "$page/runs/$name/config.yaml"
+      if [[ " $snapshot_seeds " == *" ${s#s} "* && -f $run/snapshot.params ]]; then
+        "$bin/indrive" snapshot "$run/snapshot.params" --acting-only "$page/snapshots/$name.params" > /dev/null
+      fi
+    done
+    for ev in "$out"/s*/{zeroshot,fewshot}-*; do
+      [[ -d $ev ]] || continue
+      s=$(basename "$(dirname "$ev")")
+      if ! done_mark "$ev"; then say "not finished, left out: $ev"; continue; fi
+      for csv in "$ev"/eval/evaluator-*.csv; do
+        cp "$csv" "$page/eval/$s-$(basename "$ev")-$(basename "$csv")"
+      done
+    done
+    rmdir "$page/snapshots" 2> /dev/null || true
+    "$0" summary --out "$out" > "$page/pretrain-summary.md"
+    "$bin/indrive" report "$page/eval" --out "$page" > /dev/null
+    say "published $out into $page: $(find "$page/runs" -mindepth 1 -maxdepth 1 | wc -l) runs, $(find "$page/eval" -name '*.csv' | wc -l) evaluation files"
+    ;;
   report)
     mapfile -t dirs < <(find "$out" -mindepth 2 -maxdepth 2 -type d \( -name 'zeroshot-*' -o -name 'fewshot-*' \) | sort)
     [[ ${#dirs[@]} -gt 0 ]] || { echo "no evaluations under $out yet" >&2; exit 1; }
     "$bin/indrive" report "${dirs[@]}" --out "$out/report"
     ;;
-  *) echo "unknown command '$command': chain, dreamer, summary or report (see --help)" >&2; exit 2 ;;
+  *) echo "unknown command '$command': chain, dreamer, summary, publish or report (see --help)" >&2; exit 2 ;;
 esac

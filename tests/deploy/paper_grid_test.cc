@@ -1,0 +1,97 @@
+// deploy/experiments/paper_grid.sh publish: what a grid leaves under runs/ is copied into a
+// results page that can be committed, and nothing unfinished or machine-specific goes with it.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+
+#include "child_process.h"
+#include "indrive/actor/snapshot_file.h"
+#include "indrive/agent/agent.h"
+#include "indrive/nn/serialize.h"
+#include "testing.h"
+
+namespace indrive {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+const fs::path kSource = INDRIVE_SOURCE_DIR;
+const fs::path kBin = INDRIVE_BIN_DIR;
+
+void write_text(const fs::path& path, const std::string& text) {
+  fs::create_directories(path.parent_path());
+  std::ofstream(path) << text;
+}
+
+// A finished run directory as `paper_grid.sh chain` leaves it (DONE, metrics, resolved config
+// naming paths on this machine, the training run's whole-model snapshot file).
+void write_finished_run(const fs::path& dir, agent::Agent& agent,
+                        const agent::AgentConfig& config) {
+  write_text(dir / "metrics.jsonl",
+             "{\"env_steps\": 100, \"expl/entropy\": 1.5, \"expl/return_scale\": 2.0, "
+             "\"intrinsic/raw_reward\": 0.001, \"expl/reward\": 1.0}\n"
+             "{\"env_steps\": 200, \"expl/entropy\": 0.5, \"expl/return_scale\": 4.0, "
+             "\"intrinsic/raw_reward\": 0.002, \"expl/reward\": 2.0, "
+             "\"episode_length_last20\": 300, \"episode_reach_last20\": 7, "
+             "\"coverage_fraction_visited\": 0.5}\n");
+  write_text(dir / "config.yaml",
+             "run:\n  dir: " + (kSource / "runs/paper-grid/s0/pretrain-disag").string() + "\n");
+  const nn::ParamGroup* whole[] = {&agent.world_model().params(),
+                                   &agent.exploration().actor_params()};
+  actor::write_snapshot_file(dir / "snapshot.params", nn::save_params(whole), config);
+  write_text(dir / "DONE", "");
+}
+
+TEST(PaperGridPublish, CopiesFinishedRunsAndEvaluationsAndLeavesOutTheRest) {
+  testing::TempDir dir;
+  const fs::path out = dir.path() / "grid", page = dir.path() / "page";
+  const agent::AgentConfig tiny = agent::preset("tiny");
+  agent::Agent agent(tiny);
+  write_finished_run(out / "s0/pretrain-disag", agent, tiny);
+  // A run stopped midway (no DONE) and a finished evaluation with one evaluator's rows.
+  write_text(out / "s0/finetune-lf-disag/metrics.jsonl", "{\"env_steps\": 10}\n");
+  const fs::path rows = kSource / "docs/results/method/eval/s0-zeroshot-disag-evaluator-0.csv";
+  fs::create_directories(out / "s0/zeroshot-disag/eval");
+  fs::copy_file(rows, out / "s0/zeroshot-disag/eval/evaluator-0.csv");
+  write_text(out / "s0/zeroshot-disag/DONE", "");
+
+  const fs::path log = dir.path() / "publish.log";
+  testing::Child publish(
+      {"/bin/bash", (kSource / "deploy/experiments/paper_grid.sh").string(), "publish", "--out",
+       out.string(), "--page", page.string(), "--bin", kBin.string()},
+      log);
+  ASSERT_EQ(publish.wait(120s), 0) << testing::slurp(log);
+  const std::string said = testing::slurp(log);
+
+  EXPECT_EQ(testing::slurp(page / "runs/s0-pretrain-disag/metrics.jsonl"),
+            testing::slurp(out / "s0/pretrain-disag/metrics.jsonl"));
+  const std::string config = testing::slurp(page / "runs/s0-pretrain-disag/config.yaml");
+  EXPECT_EQ(config.find(kSource.string()), std::string::npos) << config;
+  EXPECT_NE(config.find("dir: runs/paper-grid/s0/pretrain-disag"), std::string::npos) << config;
+  // Seed 0 is the default of --snapshot-seeds: its file is rewritten with what acting runs.
+  EXPECT_EQ(actor::read_snapshot_file(page / "snapshots/s0-pretrain-disag.params").blob,
+            agent.snapshot());
+  EXPECT_EQ(testing::slurp(page / "eval/s0-zeroshot-disag-evaluator-0.csv"), testing::slurp(rows));
+  EXPECT_FALSE(fs::exists(page / "runs/s0-finetune-lf-disag"));
+  EXPECT_NE(said.find("not finished, left out: " + (out / "s0/finetune-lf-disag").string()),
+            std::string::npos)
+      << said;
+  EXPECT_NE(testing::slurp(page / "pretrain-summary.md").find("| s0 | disag | 200 | 0.50 | 300"),
+            std::string::npos)
+      << testing::slurp(page / "pretrain-summary.md");
+  EXPECT_NE(testing::slurp(page / "report.md").find("Zero-shot"), std::string::npos)
+      << testing::slurp(page / "report.md");
+
+  // Without --page the command says what it needs.
+  const fs::path bad_log = dir.path() / "bad.log";
+  testing::Child bad({"/bin/bash", (kSource / "deploy/experiments/paper_grid.sh").string(),
+                      "publish", "--out", out.string(), "--bin", kBin.string()},
+                     bad_log);
+  EXPECT_EQ(bad.wait(30s), 2);
+  EXPECT_NE(testing::slurp(bad_log).find("--page"), std::string::npos) << testing::slurp(bad_log);
+}
+
+}  // namespace
+}  // namespace indrive
