@@ -238,8 +238,8 @@ struct Learner::Impl {
       INDRIVE_LOG(kError, "learner") << "update failed and was skipped: " << error.what();
     }
     ++stats.counters.updates;
+    // The loop publishes it right after this update (publish_due_snapshot).
     if (stats.counters.updates % snapshot_every == 0) snapshot_due = true;
-    publish_due_snapshot();
   }
 
   // Writes the due snapshot once the last one has reached every reader (or waited
