@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Is the few-shot stage limited by its number of updates? Few-shot fine-tuning from the paper
-# grid's pretrainings at another replay ratio (the grid's is 32: 2,500 updates in 10,000 task
-# steps), evaluated with the grid's protocol, then a table of both ratios side by side.
+# grid's pretrainings at another replay ratio (the grid's was 32, 2,500 updates in 10,000 task
+# steps, until 2026-12-03), evaluated with the grid's protocol, then a table of the ratios side
+# by side.
 #
 #   deploy/experiments/fewshot_ratio.sh run --ratio 128 --seed 2 [--method disag] [--task T]
 #   deploy/experiments/fewshot_ratio.sh table        # every ratio under --out against the grid's
@@ -9,9 +10,11 @@
 # `run` links the grid's pretraining (--grid, runs/paper-grid/s<seed>/pretrain-<method>, which
 # must be finished) into --out/r<ratio>/s<seed>/ and runs paper_grid.sh's fewshot stage there with
 # --fewshot-ratio set; both tasks unless --task is given. Resumable like the grid.
-# `table` prints, per seed, task and ratio: updates, the training measures over the last 10% of
-# task steps (episode return, steps per episode; town01's routes are the training routes), and
-# the average SR over routes and mean route completion on town01 and town02.
+# `table` prints, per seed, task and ratio (each run's learner.replay_ratio, read from its
+# config.yaml; the grid's own few-shot runs trained at 32 before 2026-12-03, at 512 since):
+# updates, the training measures over the last 10% of task steps (episode return, steps per
+# episode; town01's routes are the training routes), and the average SR over routes and mean
+# route completion on town01 and town02.
 # Options: --out DIR (runs/ablation-fewshot-ratio), --grid DIR (runs/paper-grid), --bin DIR.
 set -euo pipefail
 
@@ -23,7 +26,7 @@ ratio=""
 seed=""
 method=disag
 task_args=()
-usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -61,16 +64,19 @@ import csv, json, pathlib, re, sys
 out, grid = map(pathlib.Path, sys.argv[1:3])
 
 def runs():
-    # (ratio, seed dir) pairs: the grid's own few-shot runs are ratio 32's
-    for d in sorted(grid.glob("s*")):
-        yield 32, d
+    # the grid's seed dirs, then those of every ratio run here
+    yield from (d for d in sorted(grid.glob("s*")) if d.is_dir())
     for r in sorted(out.glob("r*")):
         if re.fullmatch(r"r\d+", r.name):
-            for d in sorted(r.glob("s*")):
-                yield int(r.name[1:]), d
+            yield from sorted(r.glob("s*"))
+
+def ratio_of(run):
+    # the replay ratio the run trained at, from its resolved config (learner.replay_ratio)
+    found = re.search(r"^\s*replay_ratio:\s*([0-9.]+)", (run / "config.yaml").read_text(), re.M)
+    return int(float(found.group(1))) if found else -1
 
 rows = []
-for ratio, sdir in runs():
+for sdir in runs():
     for ft in sorted(sdir.glob("finetune-*-*")):
         ev = sdir / ft.name.replace("finetune-", "fewshot-", 1) / "eval"
         metrics = ft / "metrics.jsonl"
@@ -92,7 +98,7 @@ for ratio, sdir in runs():
             done = [float(e["route_completion"]) for eps in routes.values() for e in eps]
             return sr, sum(done) / len(done)
         _, task, method = ft.name.split("-", 2)
-        rows.append((sdir.name[1:], task, method, ratio, last["updates"],
+        rows.append((sdir.name[1:], task, method, ratio_of(ft), last["updates"],
                      sum(ret) / len(ret) if ret else float("nan"),
                      last.get("episode_length_last20", float("nan")), *town("town01"), *town("town02")))
 print("| seed | task | method | ratio | updates | episode return (last 10%) | steps per episode (last 20) |"
