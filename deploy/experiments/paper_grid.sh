@@ -214,7 +214,8 @@ PY
       mkdir -p "$page/runs/$name"
       cp "$run/metrics.jsonl" "$page/runs/$name/"
       sed "s#$root/##g" "$run/config.yaml" > "$page/runs/$name/config.yaml"
-      if [[ " $snapshot_seeds " == *" ${s#s} "* && -f $run/snapshot.params ]]; then
+      # (a random-action run's snapshot is an untrained model: the random policy is no file)
+      if [[ " $snapshot_seeds " == *" ${s#s} "* && -f $run/snapshot.params && $run != *-random ]]; then
         "$bin/indrive" snapshot "$run/snapshot.params" --acting-only "$page/snapshots/$name.params" > /dev/null
       fi
     done
