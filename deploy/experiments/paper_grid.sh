@@ -23,7 +23,7 @@
 #   deploy/experiments/paper_grid.sh dreamer --seed 0 --task lane_following
 #   deploy/experiments/paper_grid.sh summary   # the pretraining measures, a markdown table
 #   deploy/experiments/paper_grid.sh report
-#   deploy/experiments/paper_grid.sh publish --page docs/results/grid-fewshot512
+#   deploy/experiments/paper_grid.sh publish --page docs/results/method-fewshot512
 # Two chains side by side on 2 cores: give each OMP_NUM_THREADS=1 (the script sets it and
 # OMP_WAIT_POLICY=passive unless they are set).
 # Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
