@@ -1,4 +1,6 @@
-// The conflict rule of a town's routes: no approach may be left by two different exits.
+// The conflict rule of a town's routes: no approach may be left by two different exits; and
+// the stricter layout bound: what a policy deciding by a junction's exits alone can follow.
+#include <algorithm>
 #include <map>
 #include <set>
 #include <utility>
@@ -44,6 +46,130 @@ std::vector<RouteConflict> route_conflicts(const std::vector<Route>& routes) {
   specs.reserve(routes.size());
   for (const Route& route : routes) specs.push_back(route.spec());
   return route_conflicts(specs);
+}
+
+namespace {
+
+// 'l', 'r' or 's' for a move; U-turns give 0 (no exit a route takes or a policy is offered).
+char exit_code(TurnDirection direction) {
+  if (direction == TurnDirection::kTurnaround) return 0;
+  if (is_left_turn(direction)) return 'l';
+  if (is_right_turn(direction)) return 'r';
+  return 's';
+}
+
+std::string describe_exit(char code) {
+  switch (code) {
+    case 'l':
+      return "turns left";
+    case 'r':
+      return "turns right";
+    default:
+      return "goes straight";
+  }
+}
+
+}  // namespace
+
+std::vector<RouteChoice> route_choices(const RoadNetwork& net,
+                                       const std::vector<RouteSpec>& specs) {
+  std::vector<RouteChoice> choices;
+  for (const RouteSpec& spec : specs) {
+    const size_t n = spec.edges.size();
+    const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
+    for (size_t i = 0; i < pairs; ++i) {
+      const std::string& approach = spec.edges[i];
+      const std::string& exit = spec.edges[(i + 1) % n];
+      const int edge = net.find_edge(approach);
+      if (edge < 0) throw RouteError("route " + spec.name + ": no edge '" + approach + "'");
+      std::map<std::string, char> exits;  // exit edge id -> direction code
+      for (int lane : net.edge(edge).lanes) {
+        for (int c : net.connections_from(lane)) {
+          const Connection& connection = net.connections()[c];
+          const char code = exit_code(connection.direction);
+          if (code == 0) continue;
+          exits.emplace(net.edge(net.lane(connection.to_lane).edge).id, code);
+        }
+      }
+      const auto taken = exits.find(exit);
+      if (taken == exits.end()) {
+        throw RouteError("route " + spec.name + ": edge '" + approach + "' does not lead to '" +
+                         exit + "'");
+      }
+      std::string layout;
+      for (const auto& [id, code] : exits) {
+        if (layout.find(code) == std::string::npos) layout += code;
+      }
+      if (layout.size() < 2) continue;  // one way on: no choice
+      std::sort(layout.begin(), layout.end());
+      choices.push_back(RouteChoice{spec.name, approach, layout, taken->second});
+    }
+  }
+  return choices;
+}
+
+LayoutRuleBound layout_rule_bound(const std::vector<std::string>& names,
+                                  const std::vector<RouteChoice>& choices) {
+  std::vector<std::string> routes = names;
+  for (const RouteChoice& choice : choices) {
+    if (std::find(routes.begin(), routes.end(), choice.route) == routes.end()) {
+      routes.push_back(choice.route);
+    }
+  }
+  const int n = static_cast<int>(routes.size());
+  if (n > 20) throw RouteError("layout_rule_bound: more than 20 routes");
+  // Each route's own rule; a route that takes two exits at one layout follows no rule.
+  std::vector<std::map<std::string, char>> own(n);
+  std::vector<bool> consistent(n, true);
+  for (const RouteChoice& choice : choices) {
+    const int r =
+        static_cast<int>(std::find(routes.begin(), routes.end(), choice.route) - routes.begin());
+    const auto [it, inserted] = own[r].emplace(choice.layout, choice.taken);
+    if (!inserted && it->second != choice.taken) consistent[r] = false;
+  }
+  LayoutRuleBound bound;
+  bound.route_count = n;
+  int best_size = -1;
+  for (unsigned subset = 0; subset < (1u << n); ++subset) {
+    const int size = __builtin_popcount(subset);
+    if (size <= best_size) continue;
+    std::map<std::string, char> rule;
+    bool ok = true;
+    for (int r = 0; r < n && ok; ++r) {
+      if (!(subset & (1u << r))) continue;
+      ok = consistent[r];
+      for (const auto& [layout, taken] : own[r]) {
+        const auto [it, inserted] = rule.emplace(layout, taken);
+        if (!inserted && it->second != taken) ok = false;
+      }
+    }
+    if (!ok) continue;
+    best_size = size;
+    bound.rule = rule;
+    bound.routes_followed.clear();
+    for (int r = 0; r < n; ++r) {
+      if (subset & (1u << r)) bound.routes_followed.push_back(routes[r]);
+    }
+  }
+  // Look-alikes: per layout, the routes' exits, when they differ.
+  std::map<std::string, std::vector<const RouteChoice*>> by_layout;
+  for (const RouteChoice& choice : choices) by_layout[choice.layout].push_back(&choice);
+  for (const auto& [layout, list] : by_layout) {
+    std::set<char> exits;
+    for (const RouteChoice* choice : list) exits.insert(choice->taken);
+    if (exits.size() < 2) continue;
+    std::string line = "{";
+    for (size_t i = 0; i < layout.size(); ++i) line += (i ? "," : "") + std::string(1, layout[i]);
+    line += "}:";
+    std::set<std::pair<std::string, char>> said;
+    for (const RouteChoice* choice : list) {
+      if (!said.emplace(choice->route, choice->taken).second) continue;
+      line += (said.size() > 1 ? ", " : " ") + choice->route + " " + describe_exit(choice->taken) +
+              " (" + choice->approach + ")";
+    }
+    bound.lookalikes.push_back(line);
+  }
+  return bound;
 }
 
 }  // namespace indrive::env

@@ -40,7 +40,9 @@ constexpr const char* kUsage = R"(usage:
                       [--task lane_following|collision_avoidance] [--video out.mp4]
                       [--quiet]
   indrive-env routes --town town01 --out town01.png
-      (lists the routes and warns of any approach two routes leave by different exits)
+      (lists the routes, warns of any approach two routes leave by different exits, and
+       bounds what a policy that sees no route can follow: junctions that offer the same
+       exits but where routes take different ones)
 Routes: straight, right_loop, left_loop, two_turn (empty: random spawn, no route).
 The follower policy needs a route.)";
 
@@ -110,6 +112,24 @@ int run_routes(std::map<std::string, std::string> flags) {
   for (const RouteConflict& conflict : conflicts) {
     std::printf("  warning: route conflict at %s\n", conflict.message.c_str());
   }
+  // The stricter bound: the policy sees a junction's exits, not its edge ids (see routes.h).
+  std::vector<RouteSpec> specs;
+  std::vector<std::string> names;
+  for (const Route& route : town.routes) {
+    specs.push_back(route.spec());
+    names.push_back(route.name());
+  }
+  const LayoutRuleBound bound = layout_rule_bound(names, route_choices(town.net, specs));
+  std::string followed;
+  for (const std::string& name : bound.routes_followed)
+    followed += (followed.empty() ? "" : ", ") + name;
+  std::printf(
+      "  layout bound: a policy that picks its exit by what a junction offers follows at most\n"
+      "  %zu of %d routes (%s): average SR <= %.0f%% unless it tells look-alike junctions\n"
+      "  apart by memory\n",
+      bound.routes_followed.size(), bound.route_count, followed.c_str(),
+      bound.route_count > 0 ? 100.0 * bound.routes_followed.size() / bound.route_count : 0.0);
+  for (const std::string& line : bound.lookalikes) std::printf("    look-alike %s\n", line.c_str());
   return 0;
 }
 

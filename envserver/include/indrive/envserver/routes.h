@@ -17,6 +17,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <filesystem>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -189,5 +190,41 @@ struct RouteConflict {
 // clash is reported once, against the first exit seen.
 std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs);
 std::vector<RouteConflict> route_conflicts(const std::vector<Route>& routes);
+
+// The stricter reading of "drivable by one policy that sees no route". The policy sees no
+// edge id either: at a junction it sees which exits the junction offers (its layout: left,
+// straight, right) and must choose one. Two routes that take different exits at junctions of
+// the same layout are look-alikes: a policy that decides by the layout alone follows at most
+// one of them, whatever it learned.
+//
+// One choice a route makes: at the end of `approach` the junction offers `layout` (the turn
+// directions of its exits, U-turns left out, partial turns counted as turns: a sorted string
+// of 'l', 'r', 's', e.g. "rs") and the route takes `taken`. Only junctions that offer two or
+// more exits are choices.
+struct RouteChoice {
+  std::string route;
+  std::string approach;
+  std::string layout;
+  char taken = 's';
+};
+// Every choice of every route, in route and edge order (a loop's closing pair included).
+// Throws RouteError when a route's consecutive edges are not connected in `net`.
+std::vector<RouteChoice> route_choices(const RoadNetwork& net, const std::vector<RouteSpec>& specs);
+
+// What a policy deciding by junction layout alone can follow of a set of routes.
+struct LayoutRuleBound {
+  // A largest set of routes one layout -> exit rule follows (first such set in route order),
+  // and that rule (layout -> direction code) restricted to the layouts those routes meet.
+  std::vector<std::string> routes_followed;
+  std::map<std::string, char> rule;
+  int route_count = 0;  // routes considered (every route named in the choices or `names`)
+  // One line per layout at which the routes take different exits, naming each route's exit
+  // and one approach where it takes it, e.g. "{r,s}: straight goes straight (B1_M1), ...".
+  std::vector<std::string> lookalikes;
+};
+// The bound for `names` (routes without a choice count as followed by any rule) given their
+// choices; an exhaustive search over the 2^n route subsets (n <= 20, else RouteError).
+LayoutRuleBound layout_rule_bound(const std::vector<std::string>& names,
+                                  const std::vector<RouteChoice>& choices);
 
 }  // namespace indrive::env
