@@ -213,7 +213,8 @@ PY
       if ! done_mark "$run"; then say "not finished, left out: $run"; continue; fi
       mkdir -p "$page/runs/$name"
       cp "$run/metrics.jsonl" "$page/runs/$name/"
-      sed "s#$root/##g" "$run/config.yaml" > "$page/runs/$name/config.yaml"
+      # machine paths made relative: the root as a literal string, whatever characters it holds
+      ROOT="$root/" perl -pe 's/\Q$ENV{ROOT}\E//g' "$run/config.yaml" > "$page/runs/$name/config.yaml"
       # (a random-action run's snapshot is an untrained model: the random policy is no file)
       if [[ " $snapshot_seeds " == *" ${s#s} "* && -f $run/snapshot.params && $run != *-random ]]; then
         "$bin/indrive" snapshot "$run/snapshot.params" --acting-only "$page/snapshots/$name.params" > /dev/null
@@ -228,7 +229,7 @@ PY
       done
     done
     rmdir "$page/snapshots" 2> /dev/null || true
-    "$0" summary --out "$out" > "$page/pretrain-summary.md"
+    "$0" summary --out "$out" --bin "$bin" > "$page/pretrain-summary.md"
     "$bin/indrive" report "$page/eval" --out "$page" > /dev/null
     say "published $out into $page: $(find "$page/runs" -mindepth 1 -maxdepth 1 | wc -l) runs, $(find "$page/eval" -name '*.csv' | wc -l) evaluation files"
     ;;

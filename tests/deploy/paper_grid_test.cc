@@ -25,17 +25,20 @@ void write_text(const fs::path& path, const std::string& text) {
   std::ofstream(path) << text;
 }
 
+// Two metrics lines of a pretraining run, with what the summary reads.
+const std::string kPretrainMetrics =
+    "{\"env_steps\": 100, \"expl/entropy\": 1.5, \"expl/return_scale\": 2.0, "
+    "\"intrinsic/raw_reward\": 0.001, \"expl/reward\": 1.0}\n"
+    "{\"env_steps\": 200, \"expl/entropy\": 0.5, \"expl/return_scale\": 4.0, "
+    "\"intrinsic/raw_reward\": 0.002, \"expl/reward\": 2.0, "
+    "\"episode_length_last20\": 300, \"episode_reach_last20\": 7, "
+    "\"coverage_fraction_visited\": 0.5}\n";
+
 // A finished run directory as `paper_grid.sh chain` leaves it (DONE, metrics, resolved config
 // naming paths on this machine, the training run's whole-model snapshot file).
 void write_finished_run(const fs::path& dir, agent::Agent& agent,
                         const agent::AgentConfig& config) {
-  write_text(dir / "metrics.jsonl",
-             "{\"env_steps\": 100, \"expl/entropy\": 1.5, \"expl/return_scale\": 2.0, "
-             "\"intrinsic/raw_reward\": 0.001, \"expl/reward\": 1.0}\n"
-             "{\"env_steps\": 200, \"expl/entropy\": 0.5, \"expl/return_scale\": 4.0, "
-             "\"intrinsic/raw_reward\": 0.002, \"expl/reward\": 2.0, "
-             "\"episode_length_last20\": 300, \"episode_reach_last20\": 7, "
-             "\"coverage_fraction_visited\": 0.5}\n");
+  write_text(dir / "metrics.jsonl", kPretrainMetrics);
   write_text(dir / "config.yaml",
              "run:\n  dir: " + (kSource / "runs/paper-grid/s0/pretrain-disag").string() + "\n");
   const nn::ParamGroup* whole[] = {&agent.world_model().params(),
@@ -91,6 +94,34 @@ TEST(PaperGridPublish, CopiesFinishedRunsAndEvaluationsAndLeavesOutTheRest) {
                      bad_log);
   EXPECT_EQ(bad.wait(30s), 2);
   EXPECT_NE(testing::slurp(bad_log).find("--page"), std::string::npos) << testing::slurp(bad_log);
+}
+
+// The repository path is taken literally when a run's config is made relative, whatever
+// characters it holds (a copy of the script in a folder with '#', '.', ' ' and '&').
+TEST(PaperGridPublish, MachinePathsAreRemovedLiterally) {
+  testing::TempDir dir;
+  const fs::path root = dir.path() / "repo #1 & co.x";
+  fs::create_directories(root / "deploy/experiments");
+  fs::copy_file(kSource / "deploy/experiments/paper_grid.sh",
+                root / "deploy/experiments/paper_grid.sh");
+  const fs::path out = dir.path() / "grid", page = dir.path() / "page";
+  const fs::path run = out / "s1/pretrain-rnd";
+  write_text(run / "metrics.jsonl", kPretrainMetrics);
+  write_text(run / "config.yaml", "run:\n  dir: " + (root / "runs/g/s1/pretrain-rnd").string() +
+                                      "\n  other: /elsewhere/repo #1 & coAx/kept\n");
+  write_text(run / "DONE", "");
+  fs::create_directories(out / "s1/zeroshot-rnd/eval");
+  fs::copy_file(kSource / "docs/results/method/eval/s1-zeroshot-rnd-evaluator-0.csv",
+                out / "s1/zeroshot-rnd/eval/evaluator-0.csv");
+  write_text(out / "s1/zeroshot-rnd/DONE", "");
+  const fs::path log = dir.path() / "publish.log";
+  testing::Child publish(
+      {"/bin/bash", (root / "deploy/experiments/paper_grid.sh").string(), "publish", "--out",
+       out.string(), "--page", page.string(), "--bin", kBin.string(), "--snapshot-seeds", "0"},
+      log);
+  ASSERT_EQ(publish.wait(120s), 0) << testing::slurp(log);
+  EXPECT_EQ(testing::slurp(page / "runs/s1-pretrain-rnd/config.yaml"),
+            "run:\n  dir: runs/g/s1/pretrain-rnd\n  other: /elsewhere/repo #1 & coAx/kept\n");
 }
 
 }  // namespace
