@@ -370,8 +370,10 @@ int main(int argc, char** argv) {
       const auto records = indrive::deploy::load_results(report_inputs);
       const auto report = indrive::deploy::aggregate(records);
       fs::create_directories(report_out);
-      indrive::atomic_write(report_out / "report.md",
-                            indrive::deploy::render_markdown(report, seen_town, heldout_town));
+      indrive::atomic_write(
+          report_out / "report.md",
+          indrive::deploy::render_markdown(report, seen_town, heldout_town,
+                                           indrive::deploy::route_choices_of(report)));
       indrive::atomic_write(report_out / "report.csv", indrive::deploy::render_csv(report));
       indrive::atomic_write(report_out / "report.tex", indrive::deploy::render_latex(report));
       std::printf("%d episodes from %zu run(s) -> %s/report.md (.csv, .tex)\n", report.episodes,

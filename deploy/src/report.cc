@@ -8,6 +8,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "indrive/envserver/town.h"
+
 namespace indrive::deploy {
 namespace fs = std::filesystem;
 
@@ -167,8 +169,26 @@ double average_over_routes(const Table& table, const std::string& method, const 
   return sum / static_cast<double>(t->second.size());
 }
 
+TownChoices route_choices_of(const Report& report) {
+  std::set<std::string> towns;
+  for (const auto& [key, table] : report.tables)
+    towns.insert(table.towns.begin(), table.towns.end());
+  TownChoices choices;
+  for (const std::string& name : towns) {
+    try {
+      const env::Town town = env::load_town(name);
+      std::vector<env::RouteSpec> specs;
+      for (const env::Route& route : town.routes) specs.push_back(route.spec());
+      choices[name] = env::route_choices(town.net, specs);
+    } catch (const std::exception&) {
+      // A town this machine cannot load (a file elsewhere): no bound for it.
+    }
+  }
+  return choices;
+}
+
 std::string render_markdown(const Report& report, const std::string& seen_town,
-                            const std::string& heldout_town) {
+                            const std::string& heldout_town, const TownChoices& choices) {
   std::ostringstream md;
   md << "# Results\n\n"
      << report.episodes << " episodes from " << report.runs.size() << " run(s). SR = % of "
@@ -219,6 +239,35 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
            << " |";
       }
       md << "\n";
+    }
+    bool any_bound = false;
+    for (const auto& town : table.towns) any_bound = any_bound || choices.count(town) > 0;
+    if (any_bound) {
+      // Over the routes this table holds: the share one layout -> exit rule follows.
+      md << "| *layout bound* |";
+      for (const auto& town : table.towns) {
+        const auto c = choices.find(town);
+        if (c == choices.end()) {
+          md << " - |";
+          continue;
+        }
+        std::vector<env::RouteChoice> held;
+        for (const env::RouteChoice& choice : c->second) {
+          if (std::find(table.routes.begin(), table.routes.end(), choice.route) !=
+              table.routes.end()) {
+            held.push_back(choice);
+          }
+        }
+        const env::LayoutRuleBound bound = env::layout_rule_bound(table.routes, held);
+        md << " "
+           << fixed(100.0 * static_cast<double>(bound.routes_followed.size()) /
+                    static_cast<double>(bound.route_count))
+           << " |";
+      }
+      if (has_gap) md << " |";
+      md << "\n\n*layout bound*: the highest average SR over these routes of a policy that sees "
+            "no route and picks its exit by the exits a junction offers (`indrive-env routes` "
+            "lists the look-alike junctions).\n";
     }
     // Failure reasons per route.
     std::set<std::string> reasons;

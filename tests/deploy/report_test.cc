@@ -83,6 +83,41 @@ TEST(Report, RoutesInPaperOrderAveragesAndTheGeneralisationGap) {
   EXPECT_NE(render_latex(report).find("\\multicolumn{2}{c}{two\\_turn}"), std::string::npos);
 }
 
+TEST(Report, TheLayoutBoundRowCountsTheRoutesOneLayoutRuleFollows) {
+  std::vector<EpisodeRecord> records;
+  add_episodes(records, "disag", 0, "town01", "straight", 10, 4, 4);
+  add_episodes(records, "disag", 0, "town01", "right_loop", 10, 4, 0, "off_route");
+  add_episodes(records, "disag", 0, "town01", "left_loop", 10, 4, 0, "off_route");
+  add_episodes(records, "disag", 0, "town02", "straight", 10, 4, 4);
+  const Report report = aggregate(records);
+  // straight clashes with right_loop at {r,s} and with left_loop at {l,s}; right_loop and
+  // left_loop agree, so one rule follows two of the three routes on town01.
+  TownChoices choices;
+  choices["town01"] = {{"straight", "a", "rs", 's'},
+                       {"straight", "b", "ls", 's'},
+                       {"right_loop", "c", "rs", 'r'},
+                       {"left_loop", "d", "ls", 'l'},
+                       {"two_turn", "e", "lr", 'l'}};
+  const std::string md = render_markdown(report, "town01", "town02", choices);
+  // town01: 2 of the 3 routes the table holds (two_turn's choice is not counted); town02 has
+  // no choices given: "-".
+  EXPECT_NE(md.find("| *layout bound* | 66.7 | - | |"), std::string::npos) << md;
+  // Without choices there is no such row.
+  EXPECT_EQ(render_markdown(report, "town01", "town02").find("layout bound"), std::string::npos);
+  // The built-in towns' own routes: one of four on each.
+  const TownChoices builtin = route_choices_of(report);
+  ASSERT_EQ(builtin.size(), 2u);
+  std::vector<EpisodeRecord> all;
+  for (const std::string town : {"town01", "town02"}) {
+    for (const std::string route : {"straight", "right_loop", "left_loop", "two_turn"}) {
+      add_episodes(all, "disag", 0, town, route, 10, 1, 0, "off_route");
+    }
+  }
+  EXPECT_NE(render_markdown(aggregate(all), "town01", "town02", builtin)
+                .find("| *layout bound* | 25.0 | 25.0 | |"),
+            std::string::npos);
+}
+
 TEST(Report, FailureColumnsFollowTheEventOrderOffRouteIncluded) {
   std::vector<EpisodeRecord> records;
   add_episodes(records, "icm", 0, "town01", "right_loop", 10, 3, 0, "off_route");

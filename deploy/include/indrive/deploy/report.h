@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "indrive/basics/episode_csv.h"
+#include "indrive/envserver/routes.h"
 
 namespace indrive::deploy {
 
@@ -62,9 +63,19 @@ Report aggregate(const std::vector<EpisodeRecord>& records);
 // Mean SR over the routes of one town for one method; NaN if that town has no cells.
 double average_over_routes(const Table& table, const std::string& method, const std::string& town);
 
-// Renders the tables. `seen_town`/`heldout_town` name the generalisation-gap columns.
+// The route choices of the towns a report covers (route_choices() of each town's routes), for
+// the layout bound row: the most a policy that sees no route and picks its exit by a
+// junction's layout reaches on average over the routes a table holds (envserver/routes.h).
+using TownChoices = std::map<std::string, std::vector<env::RouteChoice>>;
+
+// The choices of every town in `report` that loads (built-in towns, network files); towns
+// that do not load are left out (their bound cell reads "-").
+TownChoices route_choices_of(const Report& report);
+
+// Renders the tables. `seen_town`/`heldout_town` name the generalisation-gap columns; towns
+// in `choices` get a layout-bound row under the averages.
 std::string render_markdown(const Report& report, const std::string& seen_town,
-                            const std::string& heldout_town);
+                            const std::string& heldout_town, const TownChoices& choices = {});
 std::string render_latex(const Report& report);
 std::string render_csv(const Report& report);
 
