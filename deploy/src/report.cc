@@ -80,12 +80,16 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
   if (records.empty()) throw std::invalid_argument("no episode results to report on");
   Report report;
   report.episodes = static_cast<int>(records.size());
-  // counts[table][method][town][route][seed][density] = {episodes, successes}
+  struct Count {
+    int episodes = 0;
+    int successes = 0;
+    double completion = 0.0;  // sum of route_completion
+  };
+  // counts[table][method][town][route][seed][density]
   std::map<
       TableKey,
       std::map<std::string,
-               std::map<std::string,
-                        std::map<std::string, std::map<int, std::map<int, std::pair<int, int>>>>>>>
+               std::map<std::string, std::map<std::string, std::map<int, std::map<int, Count>>>>>>
       counts;
   std::set<std::string> other_routes;
   for (const auto& r : records) {
@@ -95,9 +99,10 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
     push_unique(table.towns, r.town);
     push_unique(report.runs, r.run_id);
     auto& cell = counts[key][r.method][r.town][r.route][r.train_seed][r.density];
-    ++cell.first;
+    ++cell.episodes;
+    cell.completion += r.route_completion;
     if (r.success) {
-      ++cell.second;
+      ++cell.successes;
     } else {
       ++table.failures[r.method][r.town][r.route]
                       [r.failure_reason.empty() ? "unknown" : r.failure_reason];
@@ -125,15 +130,19 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
         for (const auto& [route, seeds] : routes) {
           CellStats stats;
           std::vector<double> seed_means;
+          double rc = 0.0;
           for (const auto& [seed, densities] : seeds) {
-            double sum = 0.0;
+            double sum = 0.0, completion = 0.0;
             for (const auto& [density, count] : densities) {
-              sum += 100.0 * count.second / count.first;
-              stats.episodes += count.first;
-              stats.successes += count.second;
+              sum += 100.0 * count.successes / count.episodes;
+              completion += 100.0 * count.completion / count.episodes;
+              stats.episodes += count.episodes;
+              stats.successes += count.successes;
             }
             seed_means.push_back(sum / static_cast<double>(densities.size()));
+            rc += completion / static_cast<double>(densities.size());
           }
+          stats.rc = rc / static_cast<double>(seeds.size());
           stats.seeds = static_cast<int>(seed_means.size());
           double mean = 0.0;
           for (const double m : seed_means) mean += m;
@@ -269,6 +278,30 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
             "no route and picks its exit by the exits a junction offers (`indrive-env routes` "
             "lists the look-alike junctions).\n";
     }
+    // Route completion: how far the policies get, where SR only says whether they arrive.
+    md << "\n### Mean route completion (%)\n\n| method | town |";
+    for (const auto& route : table.routes) md << " " << route << " |";
+    md << " average |\n|---|---|";
+    for (std::size_t i = 0; i <= table.routes.size(); ++i) md << "---|";
+    md << "\n";
+    for (const auto& method : table.methods) {
+      for (const auto& town : table.towns) {
+        md << "| " << method << " | " << town << " |";
+        double sum = 0.0;
+        int n = 0;
+        for (const auto& route : table.routes) {
+          const CellStats* s = find_cell(table, method, town, route);
+          if (s == nullptr) {
+            md << " - |";
+            continue;
+          }
+          md << " " << fixed(s->rc) << " |";
+          sum += s->rc;
+          ++n;
+        }
+        md << " " << (n > 0 ? fixed(sum / n) : std::string("-")) << " |\n";
+      }
+    }
     // Failure reasons per route.
     std::set<std::string> reasons;
     for (const auto& [method, towns] : table.failures) {
@@ -314,7 +347,7 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
 
 std::string render_csv(const Report& report) {
   std::ostringstream csv;
-  csv << "eval_kind,task,method,town,route,seeds,episodes,successes,sr,fr,ci_low,ci_high\n";
+  csv << "eval_kind,task,method,town,route,seeds,episodes,successes,sr,fr,ci_low,ci_high,rc\n";
   for (const auto& [key, table] : report.tables) {
     for (const auto& method : table.methods) {
       for (const auto& town : table.towns) {
@@ -325,7 +358,7 @@ std::string render_csv(const Report& report) {
           csv << key.eval_kind << ',' << key.task << ',' << method << ',' << town << ',' << route
               << ',' << s.seeds << ',' << s.episodes << ',' << s.successes << ',' << fixed(s.sr, 3)
               << ',' << fixed(s.fr(), 3) << ',' << fixed(s.ci_low, 3) << ',' << fixed(s.ci_high, 3)
-              << '\n';
+              << ',' << fixed(s.rc, 3) << '\n';
         }
       }
     }

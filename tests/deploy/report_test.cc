@@ -83,6 +83,26 @@ TEST(Report, RoutesInPaperOrderAveragesAndTheGeneralisationGap) {
   EXPECT_NE(render_latex(report).find("\\multicolumn{2}{c}{two\\_turn}"), std::string::npos);
 }
 
+TEST(Report, RouteCompletionIsAveragedLikeTheSuccessRate) {
+  std::vector<EpisodeRecord> records;
+  // Seed 0: density 5 at 0.2 and 0.4 (mean 30%), density 20 at 1.0 (100%): 65% for the seed;
+  // seed 1: 0.5 (50%). The cell: 57.5%, not the pooled mean of the four episodes (52.5%).
+  add_episodes(records, "rnd", 0, "town01", "right_loop", 5, 2, 0, "off_route");
+  records[records.size() - 2].route_completion = 0.2;
+  records.back().route_completion = 0.4;
+  add_episodes(records, "rnd", 0, "town01", "right_loop", 20, 1, 1);
+  records.back().route_completion = 1.0;
+  add_episodes(records, "rnd", 1, "town01", "right_loop", 5, 1, 0, "collision");
+  records.back().route_completion = 0.5;
+  const Report report = aggregate(records);
+  const Table& table = report.tables.begin()->second;
+  EXPECT_DOUBLE_EQ(table.cells.at("rnd").at("town01").at("right_loop").rc, 57.5);
+  const std::string md = render_markdown(report, "town01", "town02");
+  EXPECT_NE(md.find("| method | town | right_loop | average |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| rnd | town01 | 57.5 | 57.5 |"), std::string::npos) << md;
+  EXPECT_NE(render_csv(report).find(",57.500\n"), std::string::npos) << render_csv(report);
+}
+
 TEST(Report, TheLayoutBoundRowCountsTheRoutesOneLayoutRuleFollows) {
   std::vector<EpisodeRecord> records;
   add_episodes(records, "disag", 0, "town01", "straight", 10, 4, 4);

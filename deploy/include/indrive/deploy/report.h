@@ -30,6 +30,9 @@ struct CellStats {
   double sr = 0.0;  // mean over seeds of (mean over densities of per-density SR)
   double ci_low = 0.0;
   double ci_high = 0.0;
+  // Mean route completion (share of the route driven, the destination or a full lap = 100),
+  // averaged like sr: over episodes of a density, over densities, over seeds.
+  double rc = 0.0;
   double fr() const { return 100.0 - sr; }
 };
 
