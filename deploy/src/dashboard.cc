@@ -637,7 +637,8 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   html << "<section id=\"tables\"><h2>Tables</h2>\n";
   try {
     const Report report = aggregate(load_results(all_runs));
-    html << markdown_to_html(render_markdown(report, input.seen_town, input.heldout_town));
+    html << markdown_to_html(
+        render_markdown(report, input.seen_town, input.heldout_town, route_choices_of(report)));
   } catch (const CsvError&) {  // load_results: no episode in any eval/*.csv yet
     html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
   }

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <iomanip>
 #include <limits>
+#include <mutex>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -179,19 +181,30 @@ double average_over_routes(const Table& table, const std::string& method, const 
 }
 
 TownChoices route_choices_of(const Report& report) {
+  // Loaded once per town and process (a live dashboard asks on every refresh); a town that
+  // does not load is remembered as such.
+  static std::mutex mutex;
+  static std::map<std::string, std::optional<std::vector<env::RouteChoice>>> cache;
   std::set<std::string> towns;
   for (const auto& [key, table] : report.tables)
     towns.insert(table.towns.begin(), table.towns.end());
   TownChoices choices;
+  const std::lock_guard<std::mutex> lock(mutex);
   for (const std::string& name : towns) {
-    try {
-      const env::Town town = env::load_town(name);
-      std::vector<env::RouteSpec> specs;
-      for (const env::Route& route : town.routes) specs.push_back(route.spec());
-      choices[name] = env::route_choices(town.net, specs);
-    } catch (const std::exception&) {
-      // A town this machine cannot load (a file elsewhere): no bound for it.
+    auto it = cache.find(name);
+    if (it == cache.end()) {
+      std::optional<std::vector<env::RouteChoice>> loaded;
+      try {
+        const env::Town town = env::load_town(name);
+        std::vector<env::RouteSpec> specs;
+        for (const env::Route& route : town.routes) specs.push_back(route.spec());
+        loaded = env::route_choices(town.net, specs);
+      } catch (const std::exception&) {
+        // A town this machine cannot load (a network file elsewhere): no bound for it.
+      }
+      it = cache.emplace(name, std::move(loaded)).first;
     }
+    if (it->second) choices[name] = *it->second;
   }
   return choices;
 }
