@@ -196,9 +196,7 @@ TownChoices route_choices_of(const Report& report) {
       std::optional<std::vector<env::RouteChoice>> loaded;
       try {
         const env::Town town = env::load_town(name);
-        std::vector<env::RouteSpec> specs;
-        for (const env::Route& route : town.routes) specs.push_back(route.spec());
-        loaded = env::route_choices(town.net, specs);
+        loaded = env::route_choices(town.net, town.routes);
       } catch (const std::exception&) {
         // A town this machine cannot load (a network file elsewhere): no bound for it.
       }

@@ -8,6 +8,25 @@
 #include "indrive/envserver/routes.h"
 
 namespace indrive::env {
+namespace {
+
+// Calls visit(approach, exit) for each consecutive edge pair of a route, a loop's closing pair
+// (last -> first) included: the junction choices both rules below look at.
+template <typename Visit>
+void for_each_approach(const RouteSpec& spec, Visit&& visit) {
+  const size_t n = spec.edges.size();
+  const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
+  for (size_t i = 0; i < pairs; ++i) visit(spec.edges[i], spec.edges[(i + 1) % n]);
+}
+
+std::vector<RouteSpec> specs_of(const std::vector<Route>& routes) {
+  std::vector<RouteSpec> specs;
+  specs.reserve(routes.size());
+  for (const Route& route : routes) specs.push_back(route.spec());
+  return specs;
+}
+
+}  // namespace
 
 std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs) {
   struct Seen {
@@ -18,14 +37,10 @@ std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs) 
   std::set<std::pair<std::string, std::string>> reported;  // (approach, clashing exit)
   std::vector<RouteConflict> conflicts;
   for (const RouteSpec& spec : specs) {
-    const size_t n = spec.edges.size();
-    const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
-    for (size_t i = 0; i < pairs; ++i) {
-      const std::string& approach = spec.edges[i];
-      const std::string& exit = spec.edges[(i + 1) % n];
+    for_each_approach(spec, [&](const std::string& approach, const std::string& exit) {
       const auto [it, inserted] = first_exit.emplace(approach, Seen{spec.name, exit});
-      if (inserted || it->second.exit == exit) continue;
-      if (!reported.emplace(approach, exit).second) continue;
+      if (inserted || it->second.exit == exit) return;
+      if (!reported.emplace(approach, exit).second) return;
       RouteConflict conflict;
       conflict.approach = approach;
       conflict.route_a = it->second.route;
@@ -36,16 +51,13 @@ std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs) 
                          conflict.exit_a + ", " + conflict.route_b + " to " + conflict.exit_b +
                          " (a policy that sees no route cannot follow both)";
       conflicts.push_back(std::move(conflict));
-    }
+    });
   }
   return conflicts;
 }
 
 std::vector<RouteConflict> route_conflicts(const std::vector<Route>& routes) {
-  std::vector<RouteSpec> specs;
-  specs.reserve(routes.size());
-  for (const Route& route : routes) specs.push_back(route.spec());
-  return route_conflicts(specs);
+  return route_conflicts(specs_of(routes));
 }
 
 namespace {
@@ -75,11 +87,7 @@ std::vector<RouteChoice> route_choices(const RoadNetwork& net,
                                        const std::vector<RouteSpec>& specs) {
   std::vector<RouteChoice> choices;
   for (const RouteSpec& spec : specs) {
-    const size_t n = spec.edges.size();
-    const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
-    for (size_t i = 0; i < pairs; ++i) {
-      const std::string& approach = spec.edges[i];
-      const std::string& exit = spec.edges[(i + 1) % n];
+    for_each_approach(spec, [&](const std::string& approach, const std::string& exit) {
       const int edge = net.find_edge(approach);
       if (edge < 0) throw RouteError("route " + spec.name + ": no edge '" + approach + "'");
       std::map<std::string, char> exits;  // exit edge id -> direction code
@@ -100,12 +108,16 @@ std::vector<RouteChoice> route_choices(const RoadNetwork& net,
       for (const auto& [id, code] : exits) {
         if (layout.find(code) == std::string::npos) layout += code;
       }
-      if (layout.size() < 2) continue;  // one way on: no choice
+      if (layout.size() < 2) return;  // one way on: no choice
       std::sort(layout.begin(), layout.end());
       choices.push_back(RouteChoice{spec.name, approach, layout, taken->second});
-    }
+    });
   }
   return choices;
+}
+
+std::vector<RouteChoice> route_choices(const RoadNetwork& net, const std::vector<Route>& routes) {
+  return route_choices(net, specs_of(routes));
 }
 
 LayoutRuleBound layout_rule_bound(const std::vector<std::string>& names,
@@ -159,7 +171,10 @@ LayoutRuleBound layout_rule_bound(const std::vector<std::string>& names,
     for (const RouteChoice* choice : list) exits.insert(choice->taken);
     if (exits.size() < 2) continue;
     std::string line = "{";
-    for (size_t i = 0; i < layout.size(); ++i) line += (i ? "," : "") + std::string(1, layout[i]);
+    for (size_t i = 0; i < layout.size(); ++i) {
+      if (i > 0) line += ',';
+      line += layout[i];
+    }
     line += "}:";
     std::set<std::pair<std::string, char>> said;
     for (const RouteChoice* choice : list) {

@@ -154,13 +154,9 @@ TEST(LayoutRuleBoundTest, ARouteThatTakesTwoExitsAtOneLayoutFollowsNoRule) {
 TEST(LayoutRuleBoundTest, TheBuiltInTownsRoutesAreLookAlikes) {
   for (const std::string town_name : {"town01", "town02"}) {
     const Town& town = testing::cached_town(town_name);
-    std::vector<RouteSpec> specs;
     std::vector<std::string> names;
-    for (const Route& route : town.routes) {
-      specs.push_back(route.spec());
-      names.push_back(route.name());
-    }
-    const std::vector<RouteChoice> choices = route_choices(town.net, specs);
+    for (const Route& route : town.routes) names.push_back(route.name());
+    const std::vector<RouteChoice> choices = route_choices(town.net, town.routes);
     // straight crosses two T-junctions, one with a side road on each hand.
     std::vector<std::string> straight_layouts;
     for (const RouteChoice& choice : choices) {

@@ -113,13 +113,9 @@ int run_routes(std::map<std::string, std::string> flags) {
     std::printf("  warning: route conflict at %s\n", conflict.message.c_str());
   }
   // The stricter bound: the policy sees a junction's exits, not its edge ids (see routes.h).
-  std::vector<RouteSpec> specs;
   std::vector<std::string> names;
-  for (const Route& route : town.routes) {
-    specs.push_back(route.spec());
-    names.push_back(route.name());
-  }
-  const LayoutRuleBound bound = layout_rule_bound(names, route_choices(town.net, specs));
+  for (const Route& route : town.routes) names.push_back(route.name());
+  const LayoutRuleBound bound = layout_rule_bound(names, route_choices(town.net, town.routes));
   std::string followed;
   for (const std::string& name : bound.routes_followed)
     followed += (followed.empty() ? "" : ", ") + name;

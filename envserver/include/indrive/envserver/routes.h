@@ -210,6 +210,7 @@ struct RouteChoice {
 // Every choice of every route, in route and edge order (a loop's closing pair included).
 // Throws RouteError when a route's consecutive edges are not connected in `net`.
 std::vector<RouteChoice> route_choices(const RoadNetwork& net, const std::vector<RouteSpec>& specs);
+std::vector<RouteChoice> route_choices(const RoadNetwork& net, const std::vector<Route>& routes);
 
 // What a policy deciding by junction layout alone can follow of a set of routes.
 struct LayoutRuleBound {
