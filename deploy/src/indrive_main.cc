@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "indrive/actor/snapshot_file.h"
+#include "indrive/agent/agent.h"
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
@@ -291,6 +292,19 @@ int main(int argc, char** argv) {
   snapshot_cmd->add_option("--acting-only", snapshot_acting_out,
                            "write the file with only what acting runs (encoder, RSSM, actor) here");
 
+  std::string untrained_preset = "tiny";
+  std::uint64_t untrained_seed = 0;
+  fs::path untrained_out;
+  auto* untrained_cmd = app.add_subcommand(
+      "untrained",
+      "write the snapshot file of an untrained agent (the initial random parameters of a "
+      "preset): the control that shows what evaluations and the route probe give with nothing "
+      "learned");
+  untrained_cmd->add_option("--preset", untrained_preset, "tiny, small or cpu")
+      ->capture_default_str();
+  untrained_cmd->add_option("--seed", untrained_seed, "initialisation seed")->capture_default_str();
+  untrained_cmd->add_option("--out", untrained_out, "snapshot file to write")->required();
+
   CLI11_PARSE(app, argc, argv);
   try {
     indrive::log::set_level(indrive::log::parse_level(log_level));
@@ -364,6 +378,18 @@ int main(int argc, char** argv) {
                         indrive::actor::read_snapshot_file(snapshot_acting_out))
                         .c_str());
       }
+      return 0;
+    }
+    if (*untrained_cmd) {
+      indrive::agent::AgentConfig config = indrive::agent::preset(untrained_preset);
+      config.seed = untrained_seed;
+      config.replay.seed = untrained_seed;
+      const indrive::agent::Agent agent(config);
+      indrive::actor::write_snapshot_file(untrained_out, agent.snapshot(), config);
+      std::printf(
+          "%s: %s", untrained_out.c_str(),
+          indrive::actor::describe_snapshot_file(indrive::actor::read_snapshot_file(untrained_out))
+              .c_str());
       return 0;
     }
     if (*report_cmd) {

@@ -160,5 +160,30 @@ TEST(IndriveSnapshot, SaysWhatAFileHoldsAndWritesTheActingOnlyForm) {
       << testing::slurp(missing_log);
 }
 
+// `indrive untrained` writes the initial parameters of a preset's agent, the untrained control:
+// the same as an Agent of that preset and seed, and another seed gives other values.
+TEST(IndriveUntrained, WritesTheInitialAgentOfAPresetAndSeed) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "untrained.params";
+  const auto other = dir.path() / "untrained-seed-3.params";
+  const auto log = dir.path() / "untrained.log";
+  testing::Child write({kIndrive.string(), "untrained", "--preset", "tiny", "--out", path.string()},
+                       log);
+  ASSERT_EQ(write.wait(60s), 0) << testing::slurp(log);
+  EXPECT_NE(testing::slurp(log).find("preset = tiny"), std::string::npos) << testing::slurp(log);
+  const agent::Agent agent(agent::preset("tiny"));
+  EXPECT_EQ(actor::read_snapshot_file(path).blob, agent.snapshot());
+  testing::Child seeded(
+      {kIndrive.string(), "untrained", "--preset", "tiny", "--seed", "3", "--out", other.string()},
+      dir.path() / "seeded.log");
+  ASSERT_EQ(seeded.wait(60s), 0);
+  EXPECT_NE(actor::read_snapshot_file(other).blob, agent.snapshot());
+  const auto bad_log = dir.path() / "bad.log";
+  testing::Child bad({kIndrive.string(), "untrained", "--preset", "huge", "--out", path.string()},
+                     bad_log);
+  EXPECT_NE(bad.wait(30s), 0);
+  EXPECT_NE(testing::slurp(bad_log).find("huge"), std::string::npos) << testing::slurp(bad_log);
+}
+
 }  // namespace
 }  // namespace indrive

@@ -69,8 +69,9 @@ int Policy::act(std::span<const std::uint8_t> frame, bool is_first, PolicyState&
   Tensor action = WorldModel::one_hot({fresh ? 0 : state.action});
   if (fresh) action = nn::zeros(Shape{1, kNumActions});
   const float first[1] = {fresh ? 1.0f : 0.0f};
-  RssmState next =
-      wm_->obs_step(prev, action, wm_->encode(image), nn::constant(Shape{1, 1}, first), rng_);
+  Tensor embed = wm_->encode(image);
+  if (keep_embedding_) last_embedding_.assign(embed.values().begin(), embed.values().end());
+  RssmState next = wm_->obs_step(prev, action, embed, nn::constant(Shape{1, 1}, first), rng_);
   Tensor probs = nn::unimix_probs(actor_(WorldModel::features(next)), kNumActions,
                                   config_.behavior.actor_unimix);
   last_probs_.assign(probs.values().begin(), probs.values().end());

@@ -155,7 +155,15 @@ void declare_service_schema(config::Schema& schema) {
                "record the first N episodes of every cell to <run>/videos/eval-*.mp4", 0)
       .add_bool("eval.continuous", false,
                 "evaluate every eval.every_k-th new snapshot into eval/curve-<id>.csv")
-      .add_int("eval.every_k", 1, "snapshot versions between continuous evaluations", 1);
+      .add_int("eval.every_k", 1, "snapshot versions between continuous evaluations", 1)
+      .add_float("eval.probe_far_m", 14.0,
+                 "route probe (indrive-actor --probe): states are recorded from this many metres "
+                 "before each junction where a route chooses ...",
+                 1.0, 100.0)
+      .add_float("eval.probe_near_m", 6.0,
+                 "... to this many (the oracle steers for a point up to 8 m ahead: nearer, its "
+                 "actions show the turn)",
+                 0.0, 99.0);
   dds::declare_config(schema);
 }
 

@@ -56,6 +56,10 @@ class Policy {
   void reseed(std::uint64_t seed) { rng_ = nn::Rng(seed ^ 0x9e3779b97f4a7c15ull); }
   // Action probabilities of the last act() call (9 values).
   const std::vector<float>& last_probs() const { return last_probs_; }
+  // With `keep` set, act() also keeps the encoder's embedding of its frame (embed_dim values),
+  // what the frame alone tells the policy; the route probe (actor/route_probe.h) reads it.
+  void keep_embedding(bool keep) { keep_embedding_ = keep; }
+  const std::vector<float>& last_embedding() const { return last_embedding_; }
   std::uint64_t loaded_snapshots() const { return loaded_; }
 
  private:
@@ -65,6 +69,8 @@ class Policy {
   nn::ParamGroup actor_params_;
   nn::Mlp actor_;
   std::vector<float> last_probs_;
+  bool keep_embedding_ = false;
+  std::vector<float> last_embedding_;
   std::uint64_t loaded_ = 0;
 };
 
