@@ -80,7 +80,8 @@ int main(int argc, char** argv) {
         if (town != probe_town && other.empty()) other = town;
       const auto report = indrive::actor::score_route_probe(samples, probe_town, other);
       const std::string text = indrive::actor::write_probe_report(
-          report, config.run_dir() / "probe", "Route probe of " + snapshot);
+          report, config.run_dir() / "probe", "Route probe of " + snapshot,
+          indrive::actor::probe_settings(config.config()));
       std::printf("%s", text.c_str());
       return 0;
     }

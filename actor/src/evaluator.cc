@@ -125,7 +125,9 @@ struct Evaluator::Impl {
           const std::string name = "snapshot file " + snapshot_file.string();
           const std::string note =
               adopt_snapshot_architecture(agent_config, file, service.agent_choices(), name);
-          if (!note.empty()) INDRIVE_LOG(kInfo, "evaluator") << note;
+          if (!note.empty()) {
+            INDRIVE_LOG(kInfo, "evaluator") << note;
+          }
           policy = make_snapshot_policy(agent_config, file.blob, head, name);
         }
         method = agent_config.phase == agent::Phase::kDreamer

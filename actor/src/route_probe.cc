@@ -401,18 +401,39 @@ ProbeReport score_route_probe(const std::vector<ProbeSample>& samples,
   return report;
 }
 
+std::string probe_settings(const config::Config& c) {
+  const ProtocolGrid grid = protocol_grid(c);
+  auto join = [](const auto& items) {
+    std::ostringstream text;
+    for (size_t i = 0; i < items.size(); ++i) text << (i ? ", " : "") << items[i];
+    return text.str();
+  };
+  return "Collected: the oracle at " + fixed(c.get<double>("eval.oracle_speed_mps"), 1) + " m/s, " +
+         (c.get<bool>("eval.probe_oracle_brake")
+              ? "coasting behind leaders and for crossing traffic (eval.probe_oracle_brake)"
+              : "never coasting") +
+         "; states from " + fixed(c.get<double>("eval.probe_far_m"), 1) + " m to " +
+         fixed(c.get<double>("eval.probe_near_m"), 1) + " m before each junction; towns " +
+         join(grid.towns) + "; routes " + join(grid.routes) + "; densities " +
+         join(grid.densities) + "; " + std::to_string(grid.episodes_per_cell) +
+         " episodes per town x route x density.";
+}
+
 std::string write_probe_report(const ProbeReport& report, const std::filesystem::path& dir,
-                               const std::string& title) {
+                               const std::string& title, const std::string& settings) {
   std::ostringstream md;
   md << "# " << title << "\n\n"
      << "Can the exit a route takes at a junction be read linearly from the snapshot's state in "
         "the last metres before it? Oracle drives, the snapshot's world model filters; ridge "
-        "probes (lambda by cross-validation over training episodes). `layout`: the best rule "
-        "from a junction's exits alone. *followed*: share of test episodes whose every decision "
+        "probes (lambda by cross-validation over training episodes). `layout`: the layout "
+        "bound's rule, from a junction's exits alone; `action`: the oracle's previous action "
+        "alone, a leak check that should stay at the layout's level. *followed*: share of test "
+        "episodes whose every decision "
         "the probe got right (decision = majority of its steps), averaged over routes; an upper "
         "estimate of the average SR a policy taking its exits that way could reach. *places "
         "right*: distinct (route, junction) pairs most of whose test decisions are right, the "
         "sample size that counts (one place recurs in every episode of its route).\n";
+  if (!settings.empty()) md << "\n" << settings << "\n";
   for (const ProbeEvaluation& e : report.evaluations) {
     std::set<std::string> routes;
     for (const auto& s : e.scores)
@@ -502,7 +523,7 @@ RouteProbe::RouteProbe(const service::ServiceConfig& service) : impl_(std::make_
   }
   impl_->policy->keep_embedding(true);
   impl_->oracle = make_oracle_policy({.target_speed_mps = c.get<double>("eval.oracle_speed_mps"),
-                                      .brake_for_leader = c.get<bool>("eval.oracle_brake")});
+                                      .brake_for_leader = c.get<bool>("eval.probe_oracle_brake")});
   env::EnvConfig config = protocol_env_config(actor::env_config(service, impl_->agent_config));
   config.town = impl_->grid.towns.front();
   impl_->env = std::make_unique<env::Env>(config);

@@ -186,7 +186,10 @@ std::vector<RouteSpec> derive_routes(const RoadNetwork& net) {
       loop_candidates(net, graph, false, true, 0), loop_candidates(net, graph, true, true, 3)};
   std::string missing;
   for (size_t k = 0; k < candidates.size(); ++k) {
-    if (candidates[k].empty()) missing += " " + std::string(kRouteNames[k]);
+    if (candidates[k].empty()) {
+      missing += ' ';  // two appends: GCC 12 warns (-Wrestrict, a false positive) on " " + name
+      missing += kRouteNames[k];
+    }
   }
   if (!missing.empty()) {
     throw RouteError("network '" + net.source().string() + "' allows no route for:" + missing +

@@ -163,7 +163,10 @@ void declare_service_schema(config::Schema& schema) {
       .add_float("eval.probe_near_m", 6.0,
                  "... to this many (the oracle steers for a point up to 8 m ahead: nearer, its "
                  "actions show the turn)",
-                 0.0, 99.0);
+                 0.0, 99.0)
+      .add_bool("eval.probe_oracle_brake", false,
+                "route probe: the oracle coasts behind leaders and for crossing traffic (off: "
+                "its coasting depends on the turn ahead and so tells the exit)");
   dds::declare_config(schema);
 }
 

@@ -125,7 +125,6 @@ struct ProbeEvaluation {
 };
 struct ProbeReport {
   std::vector<ProbeEvaluation> evaluations;
-  int window_steps = 0;  // steps recorded before each junction (most; fewer when driven fast)
 };
 
 // Scores the probe: within `train_town` (its even episodes train, odd ones test) and, when
@@ -136,13 +135,18 @@ ProbeReport score_route_probe(const std::vector<ProbeSample>& samples,
                               const std::string& train_town, const std::string& other_town);
 
 // Writes probe.md (a table per evaluation, a line per score) into `dir`, creating it; returns
-// its text.
+// its text. `settings`: a line saying how the samples were collected (probe_settings()).
 std::string write_probe_report(const ProbeReport& report, const std::filesystem::path& dir,
-                               const std::string& title);
+                               const std::string& title, const std::string& settings = "");
+// The collection settings of a configuration, as one line for the report.
+std::string probe_settings(const config::Config& config);
 
 // Drives the probe's episodes: the config's protocol grid (eval.towns, eval.routes,
-// eval.densities, eval.episodes_per_cell) with the oracle (eval.oracle_speed_mps, coasting
-// behind leaders), the snapshot file eval.snapshot_file filtering, eval.head's actor not acting.
+// eval.densities, eval.episodes_per_cell) with the oracle (eval.oracle_speed_mps; it coasts
+// only with eval.probe_oracle_brake, off by default: its coasting for crossing traffic depends
+// on the turn ahead, and with it on the action row followed town02's right_loop in 83% of the
+// episodes of a 2026-12-04 run, where the layout rule follows none), the snapshot file
+// eval.snapshot_file filtering, eval.head's actor not acting.
 // Records the states from eval.probe_far_m to eval.probe_near_m before each choice point.
 class RouteProbe {
  public:

@@ -195,7 +195,8 @@ std::vector<RouteConflict> route_conflicts(const std::vector<Route>& routes);
 // edge id either: at a junction it sees which exits the junction offers (its layout: left,
 // straight, right) and must choose one. Two routes that take different exits at junctions of
 // the same layout are look-alikes: a policy that decides by the layout alone follows at most
-// one of them, whatever it learned.
+// one of them, whatever it learned. (A camera policy may see more than the layout: the route
+// probe, actor/route_probe.h, measures whether a snapshot's inputs tell the places apart.)
 //
 // One choice a route makes: at the end of `approach` the junction offers `layout` (the turn
 // directions of its exits, U-turns left out, partial turns counted as turns: a sorted string
