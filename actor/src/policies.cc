@@ -5,6 +5,7 @@
 #include <numbers>
 #include <optional>
 #include <random>
+#include <utility>
 
 #include "indrive/agent/policy.h"
 #include "indrive/basics/check.h"
@@ -140,16 +141,21 @@ const char* to_string(PolicySource source) {
   return "snapshot";
 }
 
-std::unique_ptr<EpisodePolicy> make_snapshot_policy(agent::AgentConfig agent_config,
-                                                    std::span<const std::uint8_t> blob,
-                                                    PolicyHead head, const std::string& source) {
-  check_snapshot_head(blob, head, source);
+agent::AgentConfig acting_config(agent::AgentConfig agent_config, PolicyHead head) {
   // The policy's acting actor follows the phase: pretrain acts with the exploration actor.
   if (head == PolicyHead::kExploration) {
     agent_config.phase = agent::Phase::kPretrain;
   } else if (agent_config.phase == agent::Phase::kPretrain) {
     agent_config.phase = agent::Phase::kFinetune;
   }
+  return agent_config;
+}
+
+std::unique_ptr<EpisodePolicy> make_snapshot_policy(agent::AgentConfig agent_config,
+                                                    std::span<const std::uint8_t> blob,
+                                                    PolicyHead head, const std::string& source) {
+  check_snapshot_head(blob, head, source);
+  agent_config = acting_config(std::move(agent_config), head);
   try {
     return std::make_unique<SnapshotPolicy>(agent_config, blob);
   } catch (const std::exception& error) {

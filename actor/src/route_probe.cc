@@ -508,12 +508,7 @@ RouteProbe::RouteProbe(const service::ServiceConfig& service) : impl_(std::make_
     INDRIVE_LOG(kInfo, "probe") << note;
   }
   check_snapshot_head(file.blob, head, source);
-  agent::AgentConfig acting = impl_->agent_config;
-  if (head == PolicyHead::kExploration) {
-    acting.phase = agent::Phase::kPretrain;
-  } else if (acting.phase == agent::Phase::kPretrain) {
-    acting.phase = agent::Phase::kFinetune;
-  }
+  const agent::AgentConfig acting = acting_config(impl_->agent_config, head);
   try {
     impl_->policy = std::make_unique<agent::Policy>(acting);
     impl_->policy->load_snapshot(file.blob);

@@ -36,6 +36,10 @@ class EpisodePolicy {
   virtual int act(const env::Env& env, const env::StepResult& result) = 0;
 };
 
+// The config a policy acting with `head` is built with: the phase follows the head (pretrain
+// acts with the exploration actor; the task actor needs finetune or dreamer).
+agent::AgentConfig acting_config(agent::AgentConfig agent_config, PolicyHead head);
+
 // The agent's frozen policy on a parameter blob. agent_config gives the sizes; its phase is
 // overridden to match `head`. Throws EvalError when the blob lacks the head or does not fit
 // the config's architecture (the message names `source` and the preset).
