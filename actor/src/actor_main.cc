@@ -1,6 +1,7 @@
 // indrive-actor: a training actor (--id I) or an evaluator (--evaluate --id J --of M) of one
 // run. Started by `indrive launch`; see docs/architecture.md, section 2.
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <stdexcept>
 
@@ -72,11 +73,16 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (probe) {
+      const auto towns = indrive::actor::protocol_grid(config.config()).towns;
+      if (std::find(towns.begin(), towns.end(), probe_town) == towns.end()) {
+        throw std::invalid_argument("--probe-train-town " + probe_town +
+                                    " is not among the grid's towns (eval.towns); add it there");
+      }
       indrive::actor::RouteProbe route_probe(config);
       const auto samples = route_probe.collect(stop);
       if (stop.load()) return 0;
       std::string other;
-      for (const auto& town : indrive::actor::protocol_grid(config.config()).towns)
+      for (const auto& town : towns)
         if (town != probe_town && other.empty()) other = town;
       const auto report = indrive::actor::score_route_probe(samples, probe_town, other);
       const std::string text = indrive::actor::write_probe_report(

@@ -374,12 +374,10 @@ ProbeEvaluation evaluate(const std::string& name, const std::string& train_name,
 ProbeReport score_route_probe(const std::vector<ProbeSample>& samples,
                               const std::string& train_town, const std::string& other_town) {
   std::vector<const ProbeSample*> even, odd, all_train, other;
-  std::set<int> episodes;
   for (const ProbeSample& s : samples) {
     if (s.town == train_town) {
       (s.episode % 2 == 0 ? even : odd).push_back(&s);
       all_train.push_back(&s);
-      episodes.insert(s.episode);
     } else if (s.town == other_town) {
       other.push_back(&s);
     }

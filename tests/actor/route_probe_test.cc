@@ -223,6 +223,17 @@ TEST(RouteProbe, TheCommandWritesBothTablesAndRefusesAMissingSnapshot) {
   EXPECT_NE(bad.wait(60s), 0);
   EXPECT_NE(testing::slurp(bad_log).find("--probe needs --snapshot FILE"), std::string::npos)
       << testing::slurp(bad_log);
+  // A training town outside the grid is refused before any episode is driven.
+  const auto town_log = dir.path() / "town.log";
+  testing::Child town(
+      {program, "--probe", "--snapshot", file.string(), "--run-dir", (dir.path() / "town").string(),
+       "--set", "eval.towns=town01", "--probe-train-town", "town02"},
+      town_log);
+  EXPECT_NE(town.wait(60s), 0);
+  EXPECT_NE(testing::slurp(town_log).find("--probe-train-town town02 is not among"),
+            std::string::npos)
+      << testing::slurp(town_log);
+  EXPECT_EQ(testing::slurp(town_log).find("episode 1/"), std::string::npos);
 }
 
 }  // namespace
