@@ -189,14 +189,17 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
     if (pids.size() == 1 && pids[0] != victims[0]) restarted = pids[0];
     return restarted > 0;
   })) << logs();
-  const double respawned_s = watch.now_s() - killed_at;
+  const double restart_seen_at = watch.now_s();
+  const double respawned_s = restart_seen_at - killed_at;
 
   // It rejoins: its chunks come again and soon carry a version at least as new as the newest
-  // snapshot when its predecessor died (it never acted with it before).
-  const auto actor0_after_kill = [&] {
+  // snapshot when its predecessor died (it never acted with it before). Only chunks that
+  // arrive after the new process was seen count: chunks the killed process had in flight can
+  // arrive just after the kill (one with the newest version did, once, and passed for a rejoin).
+  const auto actor0_after_restart = [&] {
     std::vector<SeenChunk> found;
     for (const auto& chunk : watch.chunks()) {
-      if (chunk.actor_id == 0 && chunk.time_s > killed_at) found.push_back(chunk);
+      if (chunk.actor_id == 0 && chunk.time_s > restart_seen_at) found.push_back(chunk);
     }
     return found;
   };
@@ -204,7 +207,7 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
   std::uint64_t first_version = 0;
   ASSERT_TRUE(wait_until(60s,
                          [&] {
-                           for (const auto& chunk : actor0_after_kill()) {
+                           for (const auto& chunk : actor0_after_restart()) {
                              if (first_chunk_s < 0.0) {
                                first_chunk_s = chunk.time_s - killed_at;
                                first_version = chunk.policy_version;
@@ -218,9 +221,6 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
                          }))
       << "newest snapshot at the kill: v" << newest_at_kill << "\n"
       << logs();
-  // The chunks after the kill come from the new process (the old one is gone: the pid changed;
-  // the launcher waits at least a second before the restart, so in-flight chunks arrive first).
-  ASSERT_FALSE(actor0_after_kill().empty());
 
   // The learner carried on (it trained on actor 1's data meanwhile) and actor 1 never stopped.
   SeenHeartbeat learner_now;
@@ -257,7 +257,9 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
   ASSERT_FALSE(lines.empty());
   const auto& last = lines.back();
   const auto seen = watch.chunks();
-  const ActorRestart restart{0, killed_at + 0.5};
+  // Chunks before the new process was seen are the killed process's (a new process needs
+  // seconds to start SUMO and send its first chunk).
+  const ActorRestart restart{0, restart_seen_at};
   const auto [steps, chunks] = complete_chunks(seen, restart);
   // On a loaded host the test's reader can match an actor's writer after its first chunks went
   // out (a volatile topic does not replay them); those are counted from the sequence numbers,

@@ -5,8 +5,10 @@
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
 #include <netdb.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/log/Log.hpp>
@@ -142,6 +144,11 @@ void apply_discovery_server(eprosima::fastdds::dds::DomainParticipantQos& qos,
 }
 
 }  // namespace
+
+int shared_memory_participant_id(long pid, int created_before) {
+  INDRIVE_CHECK(pid >= 0 && created_before >= 0) << "pid " << pid << ", count " << created_before;
+  return static_cast<int>((pid + created_before) % kSharedMemoryParticipantIds);
+}
 
 ServerAddress parse_discovery_server(const std::string& text, const std::string& source) {
   ServerAddress address;
@@ -301,7 +308,28 @@ Participant::Participant(const ParticipantOptions& options)
         dynamic_cast<const eprosima::fastdds::rtps::SharedMemTransportDescriptor*>(
             transport.get()) != nullptr;
   }
+  const bool shared_memory_only =
+      !qos.transport().use_builtin_transports && !qos.transport().user_transports.empty() &&
+      std::all_of(
+          qos.transport().user_transports.begin(), qos.transport().user_transports.end(),
+          [](const auto& transport) {
+            return dynamic_cast<const eprosima::fastdds::rtps::SharedMemTransportDescriptor*>(
+                       transport.get()) != nullptr;
+          });
+  // Only where no UDP port depends on it (firewall rules name the UDP ports of the lowest ids).
+  if (shared_memory_only && qos.wire_protocol().participant_id < 0) {
+    static std::atomic<int> created{0};
+    qos.wire_protocol().participant_id =
+        shared_memory_participant_id(static_cast<long>(::getpid()), created.fetch_add(1));
+  }
+  participant_id_ = qos.wire_protocol().participant_id;
   participant_ = factory->create_participant(domain_id_, qos);
+  if (participant_ == nullptr && shared_memory_only && participant_id_ >= 0) {
+    INDRIVE_LOG(kWarn, "dds") << "no participant with id " << participant_id_ << " in domain "
+                              << domain_id_ << "; letting Fast DDS choose the id";
+    qos.wire_protocol().participant_id = participant_id_ = -1;
+    participant_ = factory->create_participant(domain_id_, qos);
+  }
   if (participant_ == nullptr) {
     throw DdsError("could not create a DDS participant in domain " + std::to_string(domain_id_) +
                    " with profile '" + options.participant_profile + "' of '" +
@@ -318,8 +346,11 @@ Participant::Participant(const ParticipantOptions& options)
     factory->delete_participant(participant_);
     throw DdsError("could not create the DDS publisher/subscriber of the participant");
   }
-  INDRIVE_LOG(kInfo, "dds") << "participant in domain " << domain_id_ << " from "
-                            << profiles_file_.string();
+  INDRIVE_LOG(kInfo, "dds") << "participant in domain " << domain_id_
+                            << (participant_id_ >= 0
+                                    ? " (id " + std::to_string(participant_id_) + ")"
+                                    : std::string())
+                            << " from " << profiles_file_.string();
 }
 
 Participant::~Participant() {

@@ -6,6 +6,7 @@
 
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <memory>
+#include <vector>
 
 #include "indrive/dds/participant.h"
 #include "testing.h"
@@ -123,6 +124,28 @@ TEST_F(ProfilesTest, TransportFitsTheFile) {
     EXPECT_EQ(discovery.m_DiscoveryServers.size(), 1u);
   } else {
     EXPECT_EQ(discovery.discoveryProtocol, eprosima::fastrtps::rtps::DiscoveryProtocol_t::SIMPLE);
+  }
+}
+
+// On one host (shared memory only) every participant of a process gets an id of its own, so
+// one recreated after another was closed does not take its port; UDP files leave the id to
+// Fast DDS.
+TEST_F(ProfilesTest, ParticipantIdsFitTheTransport) {
+  std::vector<int> ids = {participant_->participant_id()};
+  for (int i = 0; i < 2; ++i) {
+    Participant next(
+        ParticipantOptions{.domain_id = participant_->domain_id(),
+                           .profiles_file = testing::source_path("deploy/dds/" + kFile).string()});
+    EXPECT_EQ(next.native()->get_qos().wire_protocol().participant_id, next.participant_id());
+    ids.push_back(next.participant_id());
+  }
+  if (kFile == "single_host.xml") {
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      EXPECT_GE(ids[i], 0);
+      for (std::size_t j = 0; j < i; ++j) EXPECT_NE(ids[i], ids[j]) << i << " and " << j;
+    }
+  } else {
+    EXPECT_EQ(ids, (std::vector<int>{-1, -1, -1}));
   }
 }
 

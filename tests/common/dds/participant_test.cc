@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdlib>
 #include <fstream>
+#include <set>
 
 #include "indrive/basics/config.h"
 #include "indrive/dds/security.h"
@@ -187,6 +188,37 @@ TEST(DdsParticipant, HeartbeatsKeepOneSamplePerKey) {
   std::lock_guard<std::mutex> lock(mutex);
   ASSERT_EQ(latest.size(), 1u);
   EXPECT_EQ((latest[{msg::ROLE_ACTOR, 2u}]), 10u);
+}
+
+// A process's shared-memory participants take a new id each (a recreated one must not take the
+// dead one's port), a restarted process (another pid) starts at another id, all in range.
+TEST(DdsParticipant, SharedMemoryIdsMoveWithThePidAndTheCount) {
+  for (const long pid : {1L, 4242L, 99999L}) {
+    std::set<int> of_process;
+    for (int count = 0; count < kSharedMemoryParticipantIds; ++count) {
+      const int id = shared_memory_participant_id(pid, count);
+      EXPECT_GE(id, 0);
+      EXPECT_LT(id, kSharedMemoryParticipantIds);
+      of_process.insert(id);
+    }
+    EXPECT_EQ(of_process.size(), static_cast<std::size_t>(kSharedMemoryParticipantIds))
+        << "no id again before every other was used";
+    for (const long next : {pid + 1, pid + 7, pid + 31}) {
+      EXPECT_NE(shared_memory_participant_id(next, 0), shared_memory_participant_id(pid, 0));
+    }
+  }
+  // Ports of domain 232 (the highest): 7400 + 250 x 232 + 11 + 2 x id <= 65535.
+  EXPECT_LE(7400 + 250 * 232 + 11 + 2 * (kSharedMemoryParticipantIds - 1), 65535);
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_DEATH(shared_memory_participant_id(-1, 0), "pid");
+}
+
+// The UDP profiles keep Fast DDS's own choice (their ports are what firewall rules name).
+TEST(DdsParticipant, UdpParticipantsLetFastDdsChooseTheId) {
+  Participant participant({.domain_id = testing::unique_domain_id(), .profiles_file = profiles()});
+  EXPECT_FALSE(participant.uses_shared_memory());
+  EXPECT_EQ(participant.participant_id(), -1);
+  EXPECT_EQ(participant.native()->get_qos().wire_protocol().participant_id, -1);
 }
 
 TEST(DdsDiscoveryServer, AddressesParseWithTheDefaultPortAndResolve) {

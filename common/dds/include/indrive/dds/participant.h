@@ -116,6 +116,20 @@ inline const std::pair<std::string, std::string> kProfilesFlag{"--dds-profiles",
 // variable's value; throws DdsError when neither is set or the file does not exist.
 std::filesystem::path resolve_profiles_file(const std::string& explicit_path);
 
+// Participant ids a shared-memory-only participant is given, from 0 to
+// kSharedMemoryParticipantIds - 1 (kept low so the port numbers derived from them fit the
+// highest domain, 232).
+inline constexpr int kSharedMemoryParticipantIds = 50;
+
+// The participant id of the `created_before`-th shared-memory-only participant of process `pid`
+// (counted from 0). Fast DDS's automatic id is the lowest free one, so a process restarted
+// after a kill -9, or a participant recreated to rejoin, takes the port of the one that died;
+// a peer that had written to the dead port keeps its broken handle to it (it is marked not ok
+// and replaced under the peer's feet) and never reaches the new participant. Ids that move with
+// the pid and the count make that unlikely (a restarted process reuses the dead id in about 1
+// case of kSharedMemoryParticipantIds); Fast DDS moves a taken id on to the next free port.
+int shared_memory_participant_id(long pid, int created_before);
+
 // Routes Fast DDS's log output to the project's log sink (category "fastdds"); idempotent.
 void route_fastdds_log();
 
@@ -278,6 +292,9 @@ class Participant {
   // Whether the profile gives this participant a shared-memory transport (explicitly or through
   // Fast DDS's builtin transports).
   bool uses_shared_memory() const { return uses_shared_memory_; }
+  // The participant id given to Fast DDS (-1: Fast DDS picks the lowest free one), see
+  // shared_memory_participant_id().
+  int participant_id() const { return participant_id_; }
   // The underlying Fast DDS participant, for what this wrapper does not cover.
   eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
 
@@ -299,6 +316,7 @@ class Participant {
   double snapshot_rate_mb_s_ = 0.0;
   int domain_id_ = 0;
   bool uses_shared_memory_ = false;
+  int participant_id_ = -1;
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
   eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
