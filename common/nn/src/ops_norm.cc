@@ -172,8 +172,12 @@ void normalize_rows(const float* xv, float* y, float* mean, float* rstd, const f
 
 Tensor layer_norm_impl(Tensor x, Tensor gamma, Tensor beta, float eps, bool with_silu) {
   const std::int64_t rows = x.rows(), cols = x.cols();
-  if (gamma.defined()) INDRIVE_CHECK_EQ(gamma.numel(), cols) << "LayerNorm scale";
-  if (beta.defined()) INDRIVE_CHECK_EQ(beta.numel(), cols) << "LayerNorm offset";
+  if (gamma.defined()) {
+    INDRIVE_CHECK_EQ(gamma.numel(), cols) << "LayerNorm scale";
+  }
+  if (beta.defined()) {
+    INDRIVE_CHECK_EQ(beta.numel(), cols) << "LayerNorm offset";
+  }
   Graph& g = current_graph();
   Node* n = g.new_node(x.shape());
   n->saved = g.alloc(2 * rows);
