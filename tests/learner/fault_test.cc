@@ -222,21 +222,32 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
       << "newest snapshot at the kill: v" << newest_at_kill << "\n"
       << logs();
 
-  // The learner carried on (it trained on actor 1's data meanwhile) and actor 1 never stopped.
+  // The learner carried on (it trained on actor 1's data meanwhile) and actor 1 kept its
+  // process and kept sending. Not without a pause: a process killed while it held the lock of
+  // one of its shared-memory ports makes every peer that writes to that port wait for Fast DDS's
+  // lock timeout (1 s; "Interprocess mutex timeout when locking") until the port is marked not
+  // ok, and the learner's writes (allowance, heartbeat) pause with it, so actor 1, held by the
+  // replay ratio, waits too. Once in CI that pause outlasted actor 0's return (4.1 s). The bound
+  // here is the run resuming: no gap of 10 s in actor 1's chunks after the kill.
   SeenHeartbeat learner_now;
   ASSERT_TRUE(watch.heartbeat(msg::ROLE_LEARNER, 0, learner_now));
   EXPECT_GT(learner_now.updates, learner_at_kill.updates);
   EXPECT_EQ(testing::child_pids(launcher.pid(), {"--id", "1"}).size(), 1u);
-  const auto all = watch.chunks();
-  EXPECT_TRUE(std::any_of(all.begin(), all.end(), [&](const SeenChunk& chunk) {
-    return chunk.actor_id == 1 && chunk.time_s > killed_at &&
-           chunk.time_s < killed_at + first_chunk_s;
-  })) << "actor 1 must keep sending while actor 0 is down";
+  const double checked_at = watch.now_s();
+  double previous_s = killed_at, longest_gap_s = 0.0;
+  for (const auto& chunk : watch.chunks()) {
+    if (chunk.actor_id != 1 || chunk.time_s <= killed_at || chunk.time_s > checked_at) continue;
+    longest_gap_s = std::max(longest_gap_s, chunk.time_s - previous_s);
+    previous_s = chunk.time_s;
+  }
+  longest_gap_s = std::max(longest_gap_s, checked_at - previous_s);
+  EXPECT_LT(longest_gap_s, 10.0) << "actor 1 must keep sending while actor 0 is down and after";
   std::printf(
       "[figures] actor kill -9 under launch: respawned after %.2f s, first chunk after %.2f s "
-      "(v%llu), chunk with the newest snapshot v%llu after %.2f s\n",
+      "(v%llu), chunk with the newest snapshot v%llu after %.2f s; actor 1's longest pause "
+      "%.2f s\n",
       respawned_s, first_chunk_s, static_cast<unsigned long long>(first_version),
-      static_cast<unsigned long long>(newest_at_kill), newest_chunk_s);
+      static_cast<unsigned long long>(newest_at_kill), newest_chunk_s, longest_gap_s);
 
   // Stop the actors first (a clean exit is not restarted) so the learner stores all they sent,
   // then the launcher.
