@@ -302,20 +302,16 @@ Participant::Participant(const ParticipantOptions& options)
   if (!options.security_dir.empty()) {
     apply_security(qos, options.security_dir, options.security_role);
   }
-  uses_shared_memory_ = qos.transport().use_builtin_transports;
-  for (const auto& transport : qos.transport().user_transports) {
-    uses_shared_memory_ |=
-        dynamic_cast<const eprosima::fastdds::rtps::SharedMemTransportDescriptor*>(
-            transport.get()) != nullptr;
-  }
-  const bool shared_memory_only =
-      !qos.transport().use_builtin_transports && !qos.transport().user_transports.empty() &&
-      std::all_of(
-          qos.transport().user_transports.begin(), qos.transport().user_transports.end(),
-          [](const auto& transport) {
-            return dynamic_cast<const eprosima::fastdds::rtps::SharedMemTransportDescriptor*>(
-                       transport.get()) != nullptr;
-          });
+  const auto& transports = qos.transport().user_transports;
+  const auto shared_memory_transports =
+      std::count_if(transports.begin(), transports.end(), [](const auto& transport) {
+        return dynamic_cast<const eprosima::fastdds::rtps::SharedMemTransportDescriptor*>(
+                   transport.get()) != nullptr;
+      });
+  uses_shared_memory_ = qos.transport().use_builtin_transports || shared_memory_transports > 0;
+  const bool shared_memory_only = !qos.transport().use_builtin_transports &&
+                                  shared_memory_transports > 0 &&
+                                  shared_memory_transports == std::ssize(transports);
   // Only where no UDP port depends on it (firewall rules name the UDP ports of the lowest ids).
   if (shared_memory_only && qos.wire_protocol().participant_id < 0) {
     static std::atomic<int> created{0};
