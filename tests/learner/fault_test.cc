@@ -320,6 +320,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
     at_checkpoint = learner::unpack_checkpoint(read_file(*newest), agent_bytes, &replay_bytes);
     return at_checkpoint.updates > 0 && watch.newest_snapshot() > at_checkpoint.policy_version;
   })) << logs();
+  const double killed_at = watch.now_s();
   learner->signal(SIGKILL);
   ASSERT_EQ(learner->wait(10s), 128 + SIGKILL);
   const auto newest = files.newest();
@@ -330,8 +331,27 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   const std::uint64_t published_before = watch.newest_snapshot();
 
   // The actors keep their snapshot and wait at the allowance: no chunks, heartbeats that say
-  // so, and next to no CPU (no busy loop).
-  std::this_thread::sleep_for(2s);
+  // so, and next to no CPU (no busy loop). An actor may still use the allowance it held at the
+  // kill, and the kill can leave a shared-memory port locked, so that every write to it waits
+  // out Fast DDS's 1 s lock timeout: once in CI actor 0's last allowed chunk came 2.8 s after
+  // the kill. The quiet window therefore starts when both actors say they are waiting (a
+  // heartbeat sent at least 1 s after the kill, when no allowance can still arrive), plus 1 s
+  // for a chunk written just before that heartbeat to reach the test's reader.
+  ASSERT_TRUE(wait_until(30s,
+                         [&] {
+                           for (std::uint32_t id : {0u, 1u}) {
+                             SeenHeartbeat beat;
+                             if (!watch.heartbeat(msg::ROLE_ACTOR, id, beat) ||
+                                 beat.state != "waiting" || beat.time_s < killed_at + 1.0) {
+                               return false;
+                             }
+                           }
+                           return true;
+                         }))
+      << "both actors must say they wait for an allowance after the learner's kill\n"
+      << logs();
+  const double waiting_after_s = watch.now_s() - killed_at;
+  std::this_thread::sleep_for(1s);
   const auto quiet_from = watch.now_s();
   const double cpu0 = testing::cpu_seconds(actor0->pid());
   const double cpu1 = testing::cpu_seconds(actor1->pid());
@@ -415,14 +435,15 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   const double ratio = resumed.back().value("replay_ratio", 0.0);
   std::printf(
       "[figures] learner kill -9: checkpoint at %lld steps / %lld updates / v%llu with %zu "
-      "replay bytes, v%llu published before the kill; actors held v%llu and v%llu, used "
-      "%.3f and %.3f cores while waiting; after the restart both act with a newer snapshot "
-      "in %.2f s; final ratio %.2f\n",
+      "replay bytes, v%llu published before the kill; both actors waiting %.2f s after it, "
+      "holding v%llu and v%llu, using %.3f and %.3f cores; after the restart both act with "
+      "a newer snapshot in %.2f s; final ratio %.2f\n",
       static_cast<long long>(at_checkpoint.env_steps),
       static_cast<long long>(at_checkpoint.updates),
       static_cast<unsigned long long>(at_checkpoint.policy_version), replay_bytes.size(),
-      static_cast<unsigned long long>(published_before), static_cast<unsigned long long>(held[0]),
-      static_cast<unsigned long long>(held[1]), busy0, busy1, rejoin_s, ratio);
+      static_cast<unsigned long long>(published_before), waiting_after_s,
+      static_cast<unsigned long long>(held[0]), static_cast<unsigned long long>(held[1]), busy0,
+      busy1, rejoin_s, ratio);
 }
 
 TEST_F(FaultTest, LearnerKilledUnderLaunchIsRestartedAndResumes) {
