@@ -10,16 +10,21 @@
 //     drops, and writes its counts to --result once all arrived (exit 0) or at the timeout.
 //   dds_peer intrude --profiles F --domain D --run-id R --timeout S --result PATH [--actor-id N]
 //     An outsider of a run (tests/learner/two_host_test.cc): reads every topic for S seconds
-//     and counts the samples it gets from others, writes a sealed chunk as actor N (default 7)
-//     every 100 ms and one snapshot of version 1000, and records which of its writers could not
-//     be made (DDS Security may deny them) and how many readers of other participants its
-//     writers matched. Its own readers, which also match its own writers, are counted out.
+//     (or until SIGTERM) and counts the samples it gets from others, writes a sealed chunk as
+//     actor N (default 7) every 100 ms and one snapshot of version 1000, and records which of
+//     its writers could not be made (DDS Security may deny them) and how many readers of other
+//     participants its writers matched. Its own readers, which also match its own writers, are
+//     counted out. The counts so far are rewritten to --result every second (replaced whole),
+//     so a test can wait for what it needs and then stop the peer.
 //   All take --security DIR --role ROLE to run with DDS Security (a folder of
 //   deploy/dds/make_security.sh and the role whose certificate and permissions to use).
+#include <signal.h>
+
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -270,7 +275,16 @@ std::unique_ptr<indrive::dds::Writer<T>> try_writer(indrive::dds::Participant& p
   }
 }
 
+std::atomic<bool> g_stop{false};
+
+void on_stop_signal(int) { g_stop = true; }
+
 int intrude(const Args& args) {
+  struct sigaction action {};
+  action.sa_handler = on_stop_signal;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGINT, &action, nullptr);
   namespace msg = indrive::msg;
   indrive::dds::Participant participant(participant_options(args));
   std::map<std::string, int> refused_readers, refused_writers;
@@ -296,31 +310,42 @@ int intrude(const Args& args) {
         indrive::testing::make_synthetic_snapshot(args.run_id, 1000, std::size_t{1} << 20));
   }
   int chunk_matches = 0, policy_matches = 0;
+  const auto write_result = [&] {
+    const std::string partial = args.result + ".partial";
+    std::ofstream result(partial);
+    result << "read_trajectory " << chunks << "\n"
+           << "read_policy " << snapshots << "\n"
+           << "read_policy_announce " << announces << "\n"
+           << "read_snapshot_request " << requests << "\n"
+           << "read_allowance " << allowances << "\n"
+           << "read_episode_result " << results << "\n"
+           << "read_heartbeat " << heartbeats << "\n"
+           << "chunks_written " << chunks_written << "\n"
+           << "snapshots_written " << snapshots_written << "\n"
+           << "trajectory_readers_matched " << chunk_matches - (r1 ? 1 : 0) << "\n"
+           << "policy_readers_matched " << policy_matches - (r2 ? 1 : 0) << "\n"
+           << "trajectory_writer_refused " << refused_writers["indrive/trajectory"] << "\n"
+           << "policy_writer_refused " << refused_writers["indrive/policy"] << "\n"
+           << "readers_refused " << refused_readers.size() << "\n";
+    result.close();
+    std::filesystem::rename(partial, args.result);
+  };
   const auto end = Clock::now() + std::chrono::seconds(args.timeout_s);
-  for (std::uint64_t seq = 0; Clock::now() < end; ++seq) {
+  auto next_result = Clock::now();
+  for (std::uint64_t seq = 0; Clock::now() < end && !g_stop; ++seq) {
     if (chunk_writer) {
       chunks_written += chunk_writer->write(
           indrive::testing::make_synthetic_chunk(args.run_id, own_id, seq, 16, 32, 32));
       chunk_matches = std::max(chunk_matches, chunk_writer->matched());
     }
     if (policy_writer) policy_matches = std::max(policy_matches, policy_writer->matched());
+    if (Clock::now() >= next_result) {
+      write_result();
+      next_result += std::chrono::seconds(1);
+    }
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
-  std::ofstream result(args.result);
-  result << "read_trajectory " << chunks << "\n"
-         << "read_policy " << snapshots << "\n"
-         << "read_policy_announce " << announces << "\n"
-         << "read_snapshot_request " << requests << "\n"
-         << "read_allowance " << allowances << "\n"
-         << "read_episode_result " << results << "\n"
-         << "read_heartbeat " << heartbeats << "\n"
-         << "chunks_written " << chunks_written << "\n"
-         << "snapshots_written " << snapshots_written << "\n"
-         << "trajectory_readers_matched " << chunk_matches - (r1 ? 1 : 0) << "\n"
-         << "policy_readers_matched " << policy_matches - (r2 ? 1 : 0) << "\n"
-         << "trajectory_writer_refused " << refused_writers["indrive/trajectory"] << "\n"
-         << "policy_writer_refused " << refused_writers["indrive/policy"] << "\n"
-         << "readers_refused " << refused_readers.size() << "\n";
+  write_result();
   return 0;
 }
 
