@@ -97,19 +97,29 @@ inline std::vector<std::uint8_t> file_with_flags(const std::uint8_t* data, std::
   return file;
 }
 
+// The folder of a fuzzing process's scratch files, removed when the process exits normally
+// (every fuzz run left one behind on /dev/shm before).
+struct ScratchDir {
+  fs::path path;
+  ScratchDir() {
+    const fs::path base = fs::exists("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
+    path = base / ("indrive-fuzz-" + std::to_string(::getpid()));
+    fs::create_directories(path);
+  }
+  ~ScratchDir() {
+    std::error_code ignored;
+    fs::remove_all(path, ignored);
+  }
+};
+
 // A per-process scratch file for decoders that read paths; kept on /dev/shm when it exists.
 inline const fs::path& scratch_file(const std::string& suffix) {
-  static const fs::path dir = [] {
-    const fs::path base = fs::exists("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
-    fs::path made = base / ("indrive-fuzz-" + std::to_string(::getpid()));
-    fs::create_directories(made);
-    return made;
-  }();
+  static const ScratchDir dir;
   static std::vector<std::pair<std::string, fs::path>> files;
   for (const auto& [name, path] : files) {
     if (name == suffix) return path;
   }
-  files.emplace_back(suffix, dir / ("input" + suffix));
+  files.emplace_back(suffix, dir.path / ("input" + suffix));
   return files.back().second;
 }
 

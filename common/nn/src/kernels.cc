@@ -29,10 +29,12 @@ std::atomic<std::uint64_t> g_flops{0};
 // current generation are stale.
 std::atomic<std::uint64_t> g_graph_generation{1};
 
+#if INDRIVE_WITH_ONEDNN
 // Products below this many multiply-adds stay on Eigen in fp32 whatever the precision: a
 // primitive call (memory objects, argument map, dispatch, bf16 conversion) costs a few
 // microseconds, which such a product does not repay.
 constexpr std::int64_t kOneDnnMinWork = std::int64_t{1} << 15;
+#endif
 
 // ---- Eigen -------------------------------------------------------------------------------
 

@@ -35,19 +35,6 @@ struct Operand {
   std::int64_t cstride;  // 0 when broadcast over cols, else 1
 };
 
-inline float apply(BinaryKind k, float a, float b) {
-  switch (k) {
-    case kAdd:
-      return a + b;
-    case kSub:
-      return a - b;
-    case kMul:
-      return a * b;
-    default:
-      return a / b;
-  }
-}
-
 // Output (rows, cols) of broadcasting a and b.
 void broadcast_dims(const Shape& a, const Shape& b, std::int64_t& rows, std::int64_t& cols) {
   const std::int64_t ra = a.rows(), ca = a.cols(), rb = b.rows(), cb = b.cols();
