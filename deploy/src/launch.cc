@@ -5,10 +5,12 @@
 #include <chrono>
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
+#include "indrive/dds/shm_sweeper.h"
 #include "indrive/deploy/dashboard.h"
 #include "indrive/deploy/plot.h"
 
@@ -190,8 +192,23 @@ int run_launch(const LaunchOptions& options) {
   }
   auto next_status = std::chrono::steady_clock::now();
   auto next_page = next_status;
+  // A process that ends by a signal leaves its Fast DDS shared-memory segment in /dev/shm
+  // (~20 MiB each with single_host.xml); the launcher, which restarts such processes, removes
+  // them once they are surely dead (dds/shm_sweeper.h), every minute.
+  std::optional<dds::SharedMemorySweeper> sweeper;
+  if (fs::is_directory("/dev/shm")) sweeper.emplace("/dev/shm");
+  auto next_sweep = next_status;
   while (supervisor.poll(std::chrono::milliseconds(200))) {
     const auto now = std::chrono::steady_clock::now();
+    if (sweeper && now >= next_sweep) {
+      next_sweep = now + std::chrono::seconds(60);
+      const auto swept = sweeper->sweep(now);
+      if (swept.removed > 0) {
+        std::printf("%-12s | removed %d shared-memory segment(s) of ended processes (%.1f MiB)\n",
+                    "launch", swept.removed, static_cast<double>(swept.removed_bytes) / (1 << 20));
+        std::fflush(stdout);
+      }
+    }
     if (page.enabled() && now >= next_page) {
       page.refresh(supervisor.status(), /*ended=*/false, "");
       next_page = std::chrono::steady_clock::now() +
