@@ -193,7 +193,7 @@ int run_launch(const LaunchOptions& options) {
   auto next_status = std::chrono::steady_clock::now();
   auto next_page = next_status;
   // A process that ends by a signal leaves its Fast DDS shared-memory segment in /dev/shm
-  // (~20 MiB each with single_host.xml); the launcher, which restarts such processes, removes
+  // (about 23 MiB each with single_host.xml); the launcher, which restarts such processes, removes
   // them once they are surely dead (dds/shm_sweeper.h), every minute.
   std::optional<dds::SharedMemorySweeper> sweeper;
   if (fs::is_directory("/dev/shm")) sweeper.emplace("/dev/shm");

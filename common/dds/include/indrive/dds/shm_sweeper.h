@@ -1,11 +1,11 @@
 // Reclaims the shared memory that processes ended by a signal leave behind.
 //
 // Fast DDS 2.9's shared-memory transport gives every participant a segment of its own,
-// /dev/shm/fastrtps_<16 hex digits> (64 MiB in deploy/dds/single_host.xml, about 20 MiB of it
+// /dev/shm/fastrtps_<16 hex digits> (64 MiB in deploy/dds/single_host.xml, about 23 MiB of it
 // touched), and holds an exclusive flock on its companion file fastrtps_<...>_el for as long as
 // the owner lives. A clean exit removes both; a kill -9, the OOM killer or a crash does not,
 // and nothing in Fast DDS removes them later, so a long run whose actors the launcher restarts
-// after crashes fills /dev/shm (a RAM-backed file system) by ~20 MiB per crash. A segment whose
+// after crashes fills /dev/shm (a RAM-backed file system) by ~23 MiB per crash. A segment whose
 // lock nobody holds belongs to a dead process (`fastdds shm clean` of fastdds-tools applies the
 // same rule by hand).
 //
