@@ -26,6 +26,7 @@
 #include <fstream>
 #include <map>
 #include <random>
+#include <regex>
 #include <set>
 #include <string>
 #include <thread>
@@ -307,6 +308,20 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
   EXPECT_EQ(report.wait(60s), 0) << testing::slurp(dir.path() / "report.log");
   EXPECT_TRUE(fs::exists(report_dir / "report.md"));
 
+  // Each killed process left its shared-memory segment (single_host.xml); the launcher removes
+  // such segments within two minutes of a kill (two sweeps a minute apart found them free). The
+  // short version ends sooner than that; the soak version must have removed some.
+  const std::string launch_log = testing::slurp(dir.path() / "launch.log");
+  const std::regex removed_line("removed ([0-9]+) shared-memory segment");
+  int segments_removed = 0;
+  for (auto it = std::sregex_iterator(launch_log.begin(), launch_log.end(), removed_line);
+       it != std::sregex_iterator(); ++it) {
+    segments_removed += std::stoi((*it)[1]);
+  }
+  if (chaos_minutes > 3.0 && !recover_s.empty()) {
+    EXPECT_GT(segments_removed, 0) << "the launcher removes the segments of killed processes";
+  }
+
   std::uint64_t dropped = 0;
   for (const char* key : {"dropped_bad_checksum", "dropped_wrong_run", "dropped_bad_shape",
                           "dropped_duplicate", "dropped_wrong_schema"}) {
@@ -321,12 +336,13 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
       "actor-0 %d, actor-1 %d, evaluator %d, all %zu recovered (slowest restart %.1f s); %d bad "
       "or repeated chunks sent (%d bad_checksum, %d wrong_run, %d bad_shape, %d duplicate "
       "pairs); versions v1..v%llu strictly rising; final replay ratio %.3f (target %.0f); final "
-      "learner counted %llu drops; exact check: +5 of each reason\n",
+      "learner counted %llu drops; exact check: +5 of each reason; the launcher removed %d "
+      "shared-memory segments of ended processes\n",
       static_cast<unsigned long long>(seed), static_cast<long long>(budget), chaos_minutes,
       kills["learner"], kills["actor-0"], kills["actor-1"], kills["evaluator"], recover_s.size(),
       worst_recovery, injected_total, injected["bad_checksum"], injected["wrong_run"],
       injected["bad_shape"], injected["duplicate"], static_cast<unsigned long long>(newest), ratio,
-      kReplayRatio, static_cast<unsigned long long>(dropped));
+      kReplayRatio, static_cast<unsigned long long>(dropped), segments_removed);
 }
 
 }  // namespace
