@@ -384,21 +384,24 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
   const double evaluator_s = testing::seconds_since(joined);
   EXPECT_GE(evaluated("evaluator-on-b").first, newest_at_join) << logs();
 
-  const auto certified_chunks_seen = [&] {
+  const auto chunks_seen_of = [&](std::uint32_t actor_id) {
     int count = 0;
-    for (const auto& chunk : watch.chunks()) count += chunk.actor_id == 8u;
+    for (const auto& chunk : watch.chunks()) count += chunk.actor_id == actor_id;
     return count;
   };
   const fs::path learner_log_path = dir_.path() / "learner.log";
   ASSERT_TRUE(wait_until(180s,
                          [&] {
                            return figures(actor_result)["read_policy"] > 0 &&
-                                  certified_chunks_seen() > 0 &&
+                                  chunks_seen_of(8) > 0 &&
                                   testing::slurp(learner_log_path).find("of actor 8 ") !=
                                       std::string::npos;
                          }))
       << "the certified peer was not matched by the learner, the observer and a snapshot "
-         "writer within 180 s\n"
+         "writer within 180 s: snapshots read "
+      << figures(actor_result)["read_policy"] << ", chunks the observer saw " << chunks_seen_of(8)
+      << ", learner log names actor 8: "
+      << (testing::slurp(learner_log_path).find("of actor 8 ") != std::string::npos) << "\n"
       << logs();
   const double certified_matched_s = testing::seconds_since(joined);
   // Both run as long, at least 10 s: what the outsider did not get, it would have got by then.
@@ -427,11 +430,7 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
   // No snapshot of the intruders' version reached anyone. The secure observer saw chunks of the
   // actor certificate (8), so it would have seen the outsider's (7) had they crossed.
   EXPECT_LT(watch.newest_snapshot(), 1000u);
-  int outsider_chunks = 0, certified_chunks = 0;
-  for (const auto& chunk : watch.chunks()) {
-    outsider_chunks += chunk.actor_id == 7u;
-    certified_chunks += chunk.actor_id == 8u;
-  }
+  const int outsider_chunks = chunks_seen_of(7), certified_chunks = chunks_seen_of(8);
   EXPECT_EQ(outsider_chunks, 0);
   EXPECT_GT(certified_chunks, 0);
 
@@ -444,7 +443,7 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
   // Replay holds the two actors' chunks and nothing else. The learner heard the certified
   // peer's chunks (and dropped them for their shape), never the outsider's.
   EXPECT_EQ(lines.back().value("replay_actors", -1), 2) << lines.back().dump();
-  const std::string learner_log = testing::slurp(dir_.path() / "learner.log");
+  const std::string learner_log = testing::slurp(learner_log_path);
   EXPECT_EQ(learner_log.find("of actor 7 "), std::string::npos) << logs();
   EXPECT_NE(learner_log.find("of actor 8 "), std::string::npos) << logs();
   EXPECT_EQ(lines.back().value("dropped_chunks", -1), lines.back().value("dropped_bad_shape", -2));
