@@ -2,6 +2,7 @@
 
 #include <arpa/inet.h>
 #include <fastdds/rtps/common/Locator.h>
+#include <fastdds/rtps/participant/ParticipantDiscoveryInfo.h>
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
 #include <netdb.h>
@@ -9,10 +10,14 @@
 
 #include <algorithm>
 #include <atomic>
+#include <condition_variable>
 #include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
 #include <fastdds/dds/log/Log.hpp>
+#include <iomanip>
 #include <iterator>
+#include <sstream>
 #include <string_view>
 #include <thread>
 
@@ -265,6 +270,71 @@ std::filesystem::path resolve_profiles_file(const std::string& explicit_path) {
   return path;
 }
 
+namespace {
+
+std::string prefix_of(const eprosima::fastrtps::rtps::GUID_t& guid) {
+  std::ostringstream out;
+  out << guid.guidPrefix;
+  return out.str();
+}
+
+// Feeds a participant's PeerLedger from Fast DDS's callbacks (on its threads) and logs what
+// matters to someone deploying with DDS Security: each authentication and each refusal.
+class PeerListener final : public eprosima::fastdds::dds::DomainParticipantListener {
+ public:
+  PeerListener(PeerLedger& peers, bool secure) : peers_(peers), secure_(secure) {}
+
+  void on_participant_discovery(
+      eprosima::fastdds::dds::DomainParticipant*,
+      eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
+    using Info = eprosima::fastrtps::rtps::ParticipantDiscoveryInfo;
+    const std::string guid = prefix_of(info.info.m_guid);
+    switch (info.status) {
+      case Info::DISCOVERED_PARTICIPANT: {
+        // Called before the handshake starts; a participant without an identity token has no
+        // DDS Security and is never authenticated (a secure participant ignores it).
+        const bool offers_identity = !info.info.identity_token_.class_id().empty();
+        peers_.discovered(guid, secure_ && offers_identity, PeerLedger::Clock::now());
+        if (secure_ && !offers_identity) {
+          INDRIVE_LOG(kInfo, "dds")
+              << "participant " << guid << " has no DDS Security and is ignored";
+        }
+        break;
+      }
+      case Info::REMOVED_PARTICIPANT:
+      case Info::DROPPED_PARTICIPANT:
+        peers_.left(guid);
+        break;
+      default:
+        break;
+    }
+  }
+
+  void onParticipantAuthentication(
+      eprosima::fastdds::dds::DomainParticipant*,
+      eprosima::fastrtps::rtps::ParticipantAuthenticationInfo&& info) override {
+    using Info = eprosima::fastrtps::rtps::ParticipantAuthenticationInfo;
+    const std::string guid = prefix_of(info.guid);
+    if (info.status == Info::AUTHORIZED_PARTICIPANT) {
+      const double waited = peers_.authenticated(guid, PeerLedger::Clock::now());
+      INDRIVE_LOG(kInfo, "dds") << "DDS Security authenticated participant " << guid << " "
+                                << std::fixed << std::setprecision(2) << waited
+                                << " s after discovering it";
+    } else if (peers_.refused(guid)) {
+      INDRIVE_LOG(kWarn, "dds")
+          << "DDS Security refused participant " << guid
+          << ": its identity certificate is not signed by this run's identity CA, or it failed "
+             "the handshake (a participant of another run's security folder?)";
+    }
+  }
+
+ private:
+  PeerLedger& peers_;
+  bool secure_;
+};
+
+}  // namespace
+
 Participant::Participant(const ParticipantOptions& options)
     : profiles_file_(resolve_profiles_file(options.profiles_file)),
       snapshot_rate_mb_s_(options.snapshot_rate_mb_s),
@@ -319,12 +389,16 @@ Participant::Participant(const ParticipantOptions& options)
         shared_memory_participant_id(static_cast<long>(::getpid()), created.fetch_add(1));
   }
   participant_id_ = qos.wire_protocol().participant_id;
-  participant_ = factory->create_participant(domain_id_, qos);
+  const bool secure = security_enabled(qos);
+  listener_ = std::make_unique<PeerListener>(peers_, secure);
+  // No status of the mask: the readers' and writers' own listeners get theirs.
+  const auto mask = eprosima::fastdds::dds::StatusMask::none();
+  participant_ = factory->create_participant(domain_id_, qos, listener_.get(), mask);
   if (participant_ == nullptr && shared_memory_only && participant_id_ >= 0) {
     INDRIVE_LOG(kWarn, "dds") << "no participant with id " << participant_id_ << " in domain "
                               << domain_id_ << "; letting Fast DDS choose the id";
     qos.wire_protocol().participant_id = participant_id_ = -1;
-    participant_ = factory->create_participant(domain_id_, qos);
+    participant_ = factory->create_participant(domain_id_, qos, listener_.get(), mask);
   }
   if (participant_ == nullptr) {
     throw DdsError("could not create a DDS participant in domain " + std::to_string(domain_id_) +
@@ -342,14 +416,38 @@ Participant::Participant(const ParticipantOptions& options)
     factory->delete_participant(participant_);
     throw DdsError("could not create the DDS publisher/subscriber of the participant");
   }
-  INDRIVE_LOG(kInfo, "dds") << "participant in domain " << domain_id_
+  INDRIVE_LOG(kInfo, "dds") << "participant " << guid_prefix() << " in domain " << domain_id_
                             << (participant_id_ >= 0
                                     ? " (id " + std::to_string(participant_id_) + ")"
                                     : std::string())
-                            << " from " << profiles_file_.string();
+                            << " from " << profiles_file_.string()
+                            << (secure ? " with DDS Security" : "");
+  if (secure) {
+    stall_watch_ = std::jthread([this](std::stop_token stop) {
+      std::mutex mutex;
+      std::condition_variable_any wake;
+      std::unique_lock lock(mutex);
+      const auto after = std::chrono::duration_cast<PeerLedger::Clock::duration>(
+          std::chrono::duration<double>(kHandshakeStallS));
+      while (true) {
+        wake.wait_for(lock, stop, std::chrono::seconds(1), [] { return false; });
+        if (stop.stop_requested()) return;
+        for (const auto& stalled : peers_.newly_stalled(PeerLedger::Clock::now(), after)) {
+          INDRIVE_LOG(kWarn, "dds")
+              << "DDS Security has not authenticated participant " << stalled.guid << " "
+              << std::fixed << std::setprecision(0) << stalled.pending_s
+              << " s after discovering it (a handshake takes seconds): nothing flows between "
+                 "the two until it completes; if it never does, restart either process";
+        }
+      }
+    });
+  }
 }
 
+std::string Participant::guid_prefix() const { return prefix_of(participant_->guid()); }
+
 Participant::~Participant() {
+  stall_watch_ = std::jthread();  // stops and joins it
   // Writers and readers are owned by the caller and must already be gone (they hold pointers
   // into this participant); topics, publisher and subscriber go with the participant.
   INDRIVE_CHECK_EQ(live_endpoints_->load(), 0)

@@ -358,6 +358,17 @@ TEST(DdsSecurityWire, PolicyReachesASecureReaderButNoParticipantWithoutSecurity)
   EXPECT_EQ(injector->matched(), 1) << "the outsider's own reader only";
   EXPECT_EQ(secure_other.load(), 0) << "the secure reader took a sample from the outsider";
   EXPECT_EQ(writer->matched(), 1) << "only the secure reader matches the learner's writer";
+  // What each participant's ledger says (peers.h): the two secure ones authenticated each
+  // other; the outsider is present to them without security, never refused or pending.
+  for (const Participant* secure : {learner.get(), evaluator.get()}) {
+    const PeerLedger::Counts peers = secure->peers();
+    EXPECT_EQ(peers.authenticated, 1) << secure->guid_prefix();
+    EXPECT_EQ(peers.pending, 0) << secure->guid_prefix();
+    EXPECT_EQ(peers.refused, 0) << secure->guid_prefix();
+    EXPECT_EQ(peers.unsecured, 1) << secure->guid_prefix();
+  }
+  EXPECT_EQ(outsider->peers().authenticated, 0);
+  EXPECT_EQ(outsider->peers().pending, 0);
 }
 
 TEST(DdsSecurityWire, PermissionsRefuseEndpointsOutsideTheRole) {

@@ -34,10 +34,12 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "indrive/basics/log.h"
 #include "indrive/dds/messages.h"
+#include "indrive/dds/peers.h"
 
 namespace indrive::config {
 class Config;
@@ -297,6 +299,14 @@ class Participant {
   int participant_id() const { return participant_id_; }
   // The underlying Fast DDS participant, for what this wrapper does not cover.
   eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
+  // This participant's GUID prefix as Fast DDS prints it (the name other participants' logs
+  // give it).
+  std::string guid_prefix() const;
+  // The other participants of its domain: discovered, authenticated, refused, with a handshake
+  // pending (peers.h). With DDS Security each authentication and refusal is logged, and a
+  // handshake still pending kHandshakeStallS after discovery is warned about once.
+  PeerLedger::Counts peers() const { return peers_.counts(); }
+  static constexpr double kHandshakeStallS = 30.0;
 
  private:
   template <typename T>
@@ -317,7 +327,12 @@ class Participant {
   int domain_id_ = 0;
   bool uses_shared_memory_ = false;
   int participant_id_ = -1;
+  PeerLedger peers_;
+  // Feeds peers_ from Fast DDS's callbacks; outlives participant_.
+  std::unique_ptr<eprosima::fastdds::dds::DomainParticipantListener> listener_;
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
+  // With DDS Security: wakes once a second to warn about stalled handshakes.
+  std::jthread stall_watch_;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
   eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
   std::mutex topics_mutex_;
