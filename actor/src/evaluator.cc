@@ -141,21 +141,8 @@ struct Evaluator::Impl {
       inbox = std::make_unique<SnapshotInbox>(service.run_id(),
                                               service::architecture_descriptor(agent_config),
                                               c.get<double>("actor.request_after_s"));
-      endpoints = std::make_unique<dds::EndpointSet>(service.participant_options("evaluator"));
-      result_writer = &endpoints->writer<msg::EpisodeResult>();
-      request_writer = &endpoints->writer<msg::SnapshotRequest>();
-      endpoints->reader<msg::PolicySnapshot>(
-          [this](const msg::PolicySnapshot& snapshot) { inbox->offer(snapshot); });
-      endpoints->reader<msg::SnapshotAnnounce>(
-          [this](const msg::SnapshotAnnounce& announce) { inbox->announce(announce); });
-      endpoints->reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
-        if (heartbeat.role() != msg::ROLE_LEARNER ||
-            dds::validate(heartbeat, config.run_id()) != dds::DropReason::kOk) {
-          return;
-        }
-        last_learner_beat.store(Clock::now().time_since_epoch().count());
-        if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
-      });
+      rejoin_after_s = c.get<double>("actor.rejoin_after_s");
+      connect();
     }
     env::EnvConfig env_config = protocol_env_config(actor::env_config(service, agent_config));
     env_config.town = grid.towns.front();
@@ -164,6 +151,50 @@ struct Evaluator::Impl {
 
   // The readers' callbacks use the inbox and the counters: the endpoints go first.
   ~Impl() { endpoints.reset(); }
+
+  // This evaluator's DDS participant with its readers and writers; the inbox and the counters
+  // they feed live outside them, so a new participant carries on where the old one stopped.
+  void connect() {
+    endpoints = std::make_unique<dds::EndpointSet>(config.participant_options("evaluator"));
+    result_writer = &endpoints->writer<msg::EpisodeResult>();
+    request_writer = &endpoints->writer<msg::SnapshotRequest>();
+    endpoints->reader<msg::PolicySnapshot>(
+        [this](const msg::PolicySnapshot& snapshot) { inbox->offer(snapshot); });
+    endpoints->reader<msg::SnapshotAnnounce>(
+        [this](const msg::SnapshotAnnounce& announce) { inbox->announce(announce); });
+    endpoints->reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
+      if (heartbeat.role() != msg::ROLE_LEARNER ||
+          dds::validate(heartbeat, config.run_id()) != dds::DropReason::kOk) {
+        return;
+      }
+      last_learner_beat.store(Clock::now().time_since_epoch().count());
+      if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
+    });
+    connected_at = Clock::now();
+  }
+
+  // Like a training actor's (training_actor.cc): a participant that has heard nothing of the
+  // learner (no heartbeat, which comes every 100 ms) for actor.rejoin_after_s since it was made is
+  // replaced by a new one. A DDS Security handshake between a new participant and the learner can
+  // stall for good (an evaluator joining late on another host waited 120 s for its first
+  // snapshot while every other participant had authenticated it); the new participant's
+  // handshake starts afresh. Nothing is lost: a participant that never heard the learner holds
+  // nothing for it.
+  void maybe_rejoin() {
+    if (rejoin_after_s <= 0.0) return;
+    const Clock::time_point beat{Clock::duration(last_learner_beat.load())};
+    if (beat >= connected_at) return;  // heard with this participant
+    if (std::chrono::duration<double>(Clock::now() - connected_at).count() < rejoin_after_s) return;
+    ++rejoins;
+    INDRIVE_LOG(kWarn, "evaluator")
+        << "evaluator " << index << " heard nothing of the learner of run '" << config.run_id()
+        << "' for " << rejoin_after_s << " s; recreating its DDS participant (rejoin " << rejoins
+        << ")";
+    result_writer = nullptr;
+    request_writer = nullptr;
+    endpoints.reset();
+    connect();
+  }
 
   void request_snapshot() {
     msg::SnapshotRequest request;
@@ -225,6 +256,7 @@ struct Evaluator::Impl {
       if (inbox->should_request(snapshot ? snapshot->version() : after, Clock::now())) {
         request_snapshot();
       }
+      maybe_rejoin();
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     return nullptr;
@@ -395,6 +427,9 @@ struct Evaluator::Impl {
   std::atomic<std::uint64_t> learner_done{0};
   // When the learner's last heartbeat arrived (steady clock ticks; 0: never).
   std::atomic<Clock::rep> last_learner_beat{0};
+  Clock::time_point connected_at{};
+  double rejoin_after_s = 20.0;
+  std::uint64_t rejoins = 0;  // participants replaced (maybe_rejoin)
   // The DDS endpoints when a learner's snapshot is evaluated; the writers belong to it.
   std::unique_ptr<dds::EndpointSet> endpoints;
   dds::Writer<msg::EpisodeResult>* result_writer = nullptr;

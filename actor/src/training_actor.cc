@@ -163,15 +163,21 @@ struct TrainingActor::Impl {
   // a new one, which opens its transport ports again and is discovered afresh. Why: on one host a
   // process killed with SIGKILL leaves shared-memory ports behind that Fast DDS resets in every
   // process that touches them, and once (in CI, under load) an actor restarted after such a kill
-  // never heard the learner within 60 s; the cause was not reproduced in about 50 local runs. A
-  // learner that is merely gone is found again the same way when it returns. Called only where this
-  // actor waits for the learner. Only a participant with shared memory does it: over UDP the
-  // remedy is not needed, and it hurts across hosts, where silence means a cut link: a participant
-  // made while the link is down found no learner when the link came back (the next one, 20 s
-  // later, did; tests/learner/two_host_test.cc) and the chunks the old one still held were lost.
+  // never heard the learner within 60 s; the cause was not reproduced in about 50 local runs. And
+  // with DDS Security, a handshake between an actor and its learner can stall for good (seen
+  // twice in about 40 runs of the two-host tests, over UDP on one host: actor 1 heard nothing
+  // for 150 s while actor 0 trained). A learner that is merely gone is found again the same way
+  // when it returns. Called only where this actor waits for the learner. Over UDP only a
+  // participant that has never heard the learner does it: once heard, silence means a cut link
+  // across hosts, where replacing it hurts: the chunks the old participant still held for the
+  // learner were lost (tests/learner/two_host_test.cc); a participant that never heard the
+  // learner holds none (no allowance, no chunk).
   void maybe_rejoin() {
-    if (rejoin_after_s <= 0.0 || !endpoints->participant().uses_shared_memory()) return;
-    if (gate.silent_s() < rejoin_after_s || seconds_since(connected_at) < rejoin_after_s) return;
+    if (rejoin_after_s <= 0.0) return;
+    const double silent_s = gate.silent_s(), connected_s = seconds_since(connected_at);
+    if (silent_s < rejoin_after_s || connected_s < rejoin_after_s) return;
+    const bool never_heard = silent_s >= connected_s;  // nothing since this participant was made
+    if (!endpoints->participant().uses_shared_memory() && !never_heard) return;
     ++stats.rejoins;
     INDRIVE_LOG(kWarn, "actor") << "actor " << id << " heard nothing of the learner of run '"
                                 << config.run_id() << "' for " << rejoin_after_s

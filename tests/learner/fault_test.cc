@@ -84,6 +84,8 @@ class FaultTest : public ::testing::Test {
     return testing::read_metrics(run_dir_ / "metrics.jsonl");
   }
 
+  void replaces_its_participant_until_a_late_learner_comes();
+
   testing::TempDir dir_{"indrive-fault"};
   int domain_ = 0;
   fs::path run_dir_;
@@ -696,10 +698,15 @@ TEST_F(FaultTest, ActorsRejectForeignAndCorruptSnapshotsAndKeepRunning) {
 
 // An actor that hears nothing of its learner replaces its DDS participant every
 // actor.rejoin_after_s, and the replaced participant still works: a learner that starts late is
-// found and the actor trains with it, after which the replacements stop.
-TEST_F(FaultTest, AnActorThatHearsNoLearnerReplacesItsParticipantAndJoinsALateLearner) {
+// found and the actor trains with it, after which the replacements stop. With shared memory
+// (single_host.xml) and over UDP (default.xml), where only a participant that never heard the
+// learner is replaced (a stalled DDS Security handshake at the start looks like that).
+void FaultTest::replaces_its_participant_until_a_late_learner_comes() {
   ProcessWatch watch(domain_, profile_);
-  auto actor0 = start_actor(0, {"actor.rejoin_after_s=1"});
+  // 3 s, not less: the learner sends its heartbeat between updates, and one of its first
+  // updates (oneDNN primitives made, the first snapshot written) once held it a little over 1 s,
+  // long enough for an actor that had heard it to be replaced once more.
+  auto actor0 = start_actor(0, {"actor.rejoin_after_s=3"});
   const auto rejoins = [&] {
     const std::string text = testing::slurp(dir_.path() / "actor-0.log");
     std::size_t count = 0;
@@ -722,13 +729,60 @@ TEST_F(FaultTest, AnActorThatHearsNoLearnerReplacesItsParticipantAndJoinsALateLe
   SeenHeartbeat beat;
   ASSERT_TRUE(watch.heartbeat(msg::ROLE_ACTOR, 0, beat));
   EXPECT_GE(beat.policy_version, 1u);
-  std::printf("[figures] actor alone: %zu participant replacements before the learner came\n",
-              joined_after);
+  std::printf(
+      "[figures] actor alone over %s: %zu participant replacements before the learner came\n",
+      profile_.filename().c_str(), joined_after);
 
   actor0->signal(SIGTERM);
   EXPECT_EQ(actor0->wait(30s), 0) << logs();
   learner->signal(SIGTERM);
   EXPECT_EQ(learner->wait(60s), 0) << logs();
+}
+
+TEST_F(FaultTest, AnActorThatHearsNoLearnerReplacesItsParticipantAndJoinsALateLearner) {
+  replaces_its_participant_until_a_late_learner_comes();
+}
+
+// An evaluator that has heard nothing of its learner replaces its participant the same way
+// (over UDP, where a stalled DDS Security handshake of a late evaluator was seen), and the
+// replaced participant still gets the learner's snapshot once it comes.
+TEST_F(FaultTest, AnEvaluatorThatNeverHeardItsLearnerReplacesItsParticipantAndGetsASnapshot) {
+  profile_ = testing::source_path("deploy/dds/default.xml");
+  const fs::path log = dir_.path() / "evaluator.log";
+  auto argv = args("indrive-actor", {"actor.rejoin_after_s=2", "eval.wait_for_done=false",
+                                     "eval.towns=town01", "eval.snapshot_timeout_s=120"});
+  argv.insert(argv.end(), {"--evaluate", "--id", "0"});
+  Child evaluator(argv, log);
+  const auto rejoins = [&] {
+    const std::string text = testing::slurp(log);
+    std::size_t count = 0;
+    for (auto at = text.find("recreating its DDS participant"); at != std::string::npos;
+         at = text.find("recreating its DDS participant", at + 1)) {
+      ++count;
+    }
+    return count;
+  };
+  ASSERT_TRUE(wait_until(60s, [&] { return rejoins() >= 2; })) << logs();
+  ASSERT_TRUE(evaluator.running()) << logs();
+
+  auto learner = start_learner();
+  auto actor0 = start_actor(0);
+  EXPECT_GE(evaluated_version(log, std::chrono::seconds(90)), 1u) << logs();
+  std::printf(
+      "[figures] evaluator alone over default.xml: %zu participant replacements before "
+      "the learner came\n",
+      rejoins());
+  evaluator.signal(SIGTERM);
+  EXPECT_EQ(evaluator.wait(30s), 0) << logs();
+  actor0->signal(SIGTERM);
+  EXPECT_EQ(actor0->wait(30s), 0) << logs();
+  learner->signal(SIGTERM);
+  EXPECT_EQ(learner->wait(60s), 0) << logs();
+}
+
+TEST_F(FaultTest, OverUdpAnActorThatNeverHeardItsLearnerReplacesItsParticipantToo) {
+  profile_ = testing::source_path("deploy/dds/default.xml");
+  replaces_its_participant_until_a_late_learner_comes();
 }
 
 }  // namespace

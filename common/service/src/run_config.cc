@@ -92,7 +92,8 @@ void declare_service_schema(config::Schema& schema) {
                  "seconds an announced snapshot may be missing before it is re-requested", 0.1)
       .add_float("actor.rejoin_after_s", 20.0,
                  "seconds without word of the learner (allowance or heartbeat) after which a "
-                 "waiting actor replaces its DDS participant (0: never)",
+                 "waiting actor or evaluator replaces its DDS participant; over UDP and for "
+                 "evaluators only one that never heard the learner (0: never)",
                  0.0)
       .add_float("actor.coverage_period_s", 60.0,
                  "seconds between writes of the actor's coverage/actor-<id>.csv", 1.0);
