@@ -13,6 +13,7 @@
 #include <fstream>
 #include <map>
 #include <regex>
+#include <sstream>
 #include <thread>
 
 #include "indrive/dds/participant.h"
@@ -79,13 +80,26 @@ class TwoHosts : public ::testing::Test {
     return start(hosts_->on_b(argv), "evaluator-on-b");
   }
 
+  // Each log's DDS lines and its other warnings and errors (up to 40 each), then its last 3,000
+  // characters: a failure here is usually decided in the first seconds of discovery, long
+  // scrolled away.
   std::string logs() const {
     std::string text;
+    const std::regex notable(R"( (W|E) \[|\[dds\])");
     for (const auto& entry : fs::directory_iterator(dir_.path())) {
       if (entry.path().extension() != ".log") continue;
-      std::string body = testing::slurp(entry.path());
-      if (body.size() > 3000) body = "...\n" + body.substr(body.size() - 3000);
-      text += "----- " + entry.path().filename().string() + "\n" + body;
+      const std::string body = testing::slurp(entry.path());
+      text += "----- " + entry.path().filename().string() + "\n";
+      std::istringstream lines(body);
+      int dds = 0, other = 0;
+      for (std::string line; std::getline(lines, line);) {
+        if (!std::regex_search(line, notable)) continue;
+        // DDS lines first in rank: a learner's warnings about dropped chunks fill any cap.
+        int& kept = line.find("[dds]") != std::string::npos ? dds : other;
+        if (kept < 40) text += line + "\n", ++kept;
+      }
+      text += body.size() > 3000 ? "... (last 3000 characters)\n" + body.substr(body.size() - 3000)
+                                 : "... (all of it)\n" + body;
     }
     return text;
   }
@@ -401,7 +415,11 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
          "writer within 180 s: snapshots read "
       << figures(actor_result)["read_policy"] << ", chunks the observer saw " << chunks_seen_of(8)
       << ", learner log names actor 8: "
-      << (testing::slurp(learner_log_path).find("of actor 8 ") != std::string::npos) << "\n"
+      << (testing::slurp(learner_log_path).find("of actor 8 ") != std::string::npos)
+      << "; the certified peer authenticated "
+      << figures(actor_result)["participants_authenticated"] << " participants, "
+      << figures(actor_result)["handshakes_pending"] << " pending, "
+      << figures(actor_result)["rejoins"] << " participant replacements\n"
       << logs();
   const double certified_matched_s = testing::seconds_since(joined);
   // Both run as long, at least 10 s: what the outsider did not get, it would have got by then.
@@ -452,7 +470,8 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
       "start v%llu) %.2f s after it started; outsider without certificate: %.0f chunks written, "
       "%.0f samples read of 7 topics, %.0f readers matched; actor certificate: policy writer "
       "refused %.0f, %.0f snapshots read, %d chunks seen by the observer, matched by all %.1f s "
-      "after it started; learner: %lld chunks from %lld actors in replay, %lld dropped\n",
+      "after it started (%.0f participant replacements after a stalled handshake); learner: "
+      "%lld chunks from %lld actors in replay, %lld dropped\n",
       static_cast<unsigned long long>(evaluated("evaluator-on-b").first),
       static_cast<unsigned long long>(newest_at_join), evaluator_s, outsider_saw["chunks_written"],
       outsider_saw["read_trajectory"] + outsider_saw["read_policy"] +
@@ -461,7 +480,8 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
           outsider_saw["read_heartbeat"],
       outsider_saw["trajectory_readers_matched"] + outsider_saw["policy_readers_matched"],
       actor_saw["policy_writer_refused"], actor_saw["read_policy"], certified_chunks,
-      certified_matched_s, static_cast<long long>(lines.back().value("chunks", 0)),
+      certified_matched_s, actor_saw["rejoins"],
+      static_cast<long long>(lines.back().value("chunks", 0)),
       static_cast<long long>(lines.back().value("replay_actors", 0)),
       static_cast<long long>(lines.back().value("dropped_chunks", 0)));
 }
