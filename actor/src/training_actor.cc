@@ -164,14 +164,14 @@ struct TrainingActor::Impl {
   // process killed with SIGKILL leaves shared-memory ports behind that Fast DDS resets in every
   // process that touches them, and once (in CI, under load) an actor restarted after such a kill
   // never heard the learner within 60 s; the cause was not reproduced in about 50 local runs. And
-  // with DDS Security, a handshake between an actor and its learner can stall for good (seen
-  // twice in about 40 runs of the two-host tests, over UDP on one host: actor 1 heard nothing
-  // for 150 s while actor 0 trained). A learner that is merely gone is found again the same way
-  // when it returns. Called only where this actor waits for the learner. Over UDP only a
-  // participant that has never heard the learner does it: once heard, silence means a cut link
-  // across hosts, where replacing it hurts: the chunks the old participant still held for the
-  // learner were lost (tests/learner/two_host_test.cc); a participant that never heard the
-  // learner holds none (no allowance, no chunk).
+  // with DDS Security, a new participant's handshake with the learner can stall for good (in
+  // about 55 runs of the two-host security test, once for actor 1, over UDP on the learner's
+  // host: it heard nothing for 150 s while actor 0 trained; once for a late evaluator). A learner
+  // that is merely gone is found again the same way when it returns. Called only where this actor
+  // waits for the learner. Over UDP only a participant that has never heard the learner does it:
+  // once heard, silence means a cut link across hosts, where replacing it hurts: the chunks the old
+  // participant still held for the learner were lost (tests/learner/two_host_test.cc); a
+  // participant that never heard the learner holds none (no allowance, no chunk).
   void maybe_rejoin() {
     if (rejoin_after_s <= 0.0) return;
     const double silent_s = gate.silent_s(), connected_s = seconds_since(connected_at);

@@ -539,6 +539,15 @@ fs::path volatile_policy_profile(const fs::path& folder) {
   return path;
 }
 
+// How many times a process's log says it replaced its DDS participant (maybe_rejoin).
+std::size_t participant_replacements(const fs::path& log) {
+  const std::string text = testing::slurp(log);
+  const std::string line = "recreating its DDS participant";
+  std::size_t count = 0;
+  for (auto at = text.find(line); at != std::string::npos; at = text.find(line, at + 1)) ++count;
+  return count;
+}
+
 // Waits for an evaluator's "evaluates snapshot vN" line; returns N, or 0 on timeout.
 std::uint64_t evaluated_version(const fs::path& log, std::chrono::seconds timeout) {
   std::uint64_t version = 0;
@@ -707,15 +716,7 @@ void FaultTest::replaces_its_participant_until_a_late_learner_comes() {
   // updates (oneDNN primitives made, the first snapshot written) once held it a little over 1 s,
   // long enough for an actor that had heard it to be replaced once more.
   auto actor0 = start_actor(0, {"actor.rejoin_after_s=3"});
-  const auto rejoins = [&] {
-    const std::string text = testing::slurp(dir_.path() / "actor-0.log");
-    std::size_t count = 0;
-    for (auto at = text.find("recreating its DDS participant"); at != std::string::npos;
-         at = text.find("recreating its DDS participant", at + 1)) {
-      ++count;
-    }
-    return count;
-  };
+  const auto rejoins = [&] { return participant_replacements(dir_.path() / "actor-0.log"); };
   ASSERT_TRUE(wait_until(60s, [&] { return rejoins() >= 2; })) << logs();
   ASSERT_TRUE(actor0->running()) << logs();
   EXPECT_TRUE(watch.chunks().empty()) << "no chunk without a learner's allowance";
@@ -753,15 +754,7 @@ TEST_F(FaultTest, AnEvaluatorThatNeverHeardItsLearnerReplacesItsParticipantAndGe
                                      "eval.towns=town01", "eval.snapshot_timeout_s=120"});
   argv.insert(argv.end(), {"--evaluate", "--id", "0"});
   Child evaluator(argv, log);
-  const auto rejoins = [&] {
-    const std::string text = testing::slurp(log);
-    std::size_t count = 0;
-    for (auto at = text.find("recreating its DDS participant"); at != std::string::npos;
-         at = text.find("recreating its DDS participant", at + 1)) {
-      ++count;
-    }
-    return count;
-  };
+  const auto rejoins = [&] { return participant_replacements(log); };
   ASSERT_TRUE(wait_until(60s, [&] { return rejoins() >= 2; })) << logs();
   ASSERT_TRUE(evaluator.running()) << logs();
 

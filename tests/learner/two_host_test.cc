@@ -471,7 +471,8 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
       "%.0f samples read of 7 topics, %.0f readers matched; actor certificate: policy writer "
       "refused %.0f, %.0f snapshots read, %d chunks seen by the observer, matched by all %.1f s "
       "after it started (%.0f participant replacements after a stalled handshake); learner: "
-      "%lld chunks from %lld actors in replay, %lld dropped\n",
+      "%lld chunks from %lld actors in replay, %lld dropped; participants the service replaced "
+      "before hearing its learner: %d\n",
       static_cast<unsigned long long>(evaluated("evaluator-on-b").first),
       static_cast<unsigned long long>(newest_at_join), evaluator_s, outsider_saw["chunks_written"],
       outsider_saw["read_trajectory"] + outsider_saw["read_policy"] +
@@ -483,7 +484,8 @@ TEST_F(TwoHosts, SecurityLetsTheRolesInAndKeepsOutsidersOut) {
       certified_matched_s, actor_saw["rejoins"],
       static_cast<long long>(lines.back().value("chunks", 0)),
       static_cast<long long>(lines.back().value("replay_actors", 0)),
-      static_cast<long long>(lines.back().value("dropped_chunks", 0)));
+      static_cast<long long>(lines.back().value("dropped_chunks", 0)),
+      count_lines(std::regex("recreating its DDS participant")));
 }
 
 // What DDS Security costs across the link: a publisher on A writes a 10 MB snapshot, then 1,000
