@@ -436,8 +436,10 @@ Participant::Participant(const ParticipantOptions& options)
           INDRIVE_LOG(kWarn, "dds")
               << "DDS Security has not authenticated participant " << stalled.guid << " "
               << std::fixed << std::setprecision(0) << stalled.pending_s
-              << " s after discovering it (a handshake takes seconds): nothing flows between "
-                 "the two until it completes; if it never does, restart either process";
+              << " s after discovering it (a handshake takes well under a second): nothing "
+                 "flows between the two until it completes, and a stalled one never does; an "
+                 "actor or evaluator that has not heard its learner replaces its participant "
+                 "(actor.rejoin_after_s), any other process must be restarted";
         }
       }
     });
