@@ -436,7 +436,7 @@ Participant::Participant(const ParticipantOptions& options)
           INDRIVE_LOG(kWarn, "dds")
               << "DDS Security has not authenticated participant " << stalled.guid << " "
               << std::fixed << std::setprecision(0) << stalled.pending_s
-              << " s after discovering it (a handshake takes well under a second): nothing "
+              << " s after discovering it (handshakes take 0.02-2.1 s in the tests): nothing "
                  "flows between the two until it completes, and a stalled one never does; an "
                  "actor or evaluator that has not heard its learner replaces its participant "
                  "(actor.rejoin_after_s), any other process must be restarted";
