@@ -1,5 +1,6 @@
 #include "indrive/learner/snapshot_publisher.h"
 
+#include <algorithm>
 #include <string>
 #include <utility>
 
@@ -72,6 +73,10 @@ void SnapshotPublisher::publish(msg::PolicySnapshot snapshot, bool done) {
   last_write_ = std::chrono::steady_clock::now();
   newest_ = std::move(snapshot);
   announce(done);
+}
+
+int SnapshotPublisher::readers() const {
+  return std::min(snapshot_writer_.matched(), announce_writer_.matched());
 }
 
 bool SnapshotPublisher::wait_until_delivered(std::chrono::milliseconds timeout) {

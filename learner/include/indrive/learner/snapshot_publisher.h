@@ -84,6 +84,11 @@ class SnapshotPublisher {
   // Whether a SnapshotRequest of this run came since the last call.
   bool take_request() { return requested_.exchange(false); }
 
+  // Readers matched by both the snapshot and the announce writer (the fewer of the two). The
+  // announce is volatile: a reader that this side has not matched yet misses it, even when that
+  // reader already matched this writer from its side (discovery is not symmetric in time).
+  int readers() const;
+
   const std::optional<msg::PolicySnapshot>& newest() const { return newest_; }
   // Seconds since the last announce (very many before the first).
   double seconds_since_announce() const;
