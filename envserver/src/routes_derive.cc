@@ -3,6 +3,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <map>
 #include <queue>
 #include <set>
 
@@ -170,6 +171,109 @@ std::vector<Candidate> loop_candidates(const RoadNetwork& net, const EdgeGraph& 
   return candidates;
 }
 
+// What the set search needs of a candidate: the exit it takes from each approach, and the exit
+// it takes at each junction layout (route_choices()), with whether one rule fits it at all.
+struct Profile {
+  std::map<std::string, std::string> exits;  // approach edge -> exit edge
+  std::map<std::string, char> rule;          // layout -> exit code
+  bool consistent = true;                    // never two exits at one layout
+};
+
+Profile profile_of(const RoadNetwork& net, const RouteSpec& spec) {
+  Profile profile;
+  const size_t n = spec.edges.size();
+  const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
+  for (size_t i = 0; i < pairs; ++i) profile.exits.emplace(spec.edges[i], spec.edges[(i + 1) % n]);
+  for (const RouteChoice& choice : route_choices(net, {spec})) {
+    const auto [it, inserted] = profile.rule.emplace(choice.layout, choice.taken);
+    if (!inserted && it->second != choice.taken) profile.consistent = false;
+  }
+  return profile;
+}
+
+// Whether two maps agree wherever both have a key.
+template <typename Map>
+bool agree(const Map& a, const Map& b) {
+  for (const auto& [key, value] : a) {
+    const auto it = b.find(key);
+    if (it != b.end() && it->second != value) return false;
+  }
+  return true;
+}
+
+// Candidates considered per route kind (in rank order): 48^4 sets at most, each a few bit
+// operations, well under a second on any network.
+constexpr size_t kCandidatesPerKind = 48;
+
+struct SetSearch {
+  bool found = false;         // some set is conflict-free
+  std::vector<size_t> index;  // its candidate per kind
+  int followed = 0;           // its layout bound (routes one rule follows)
+};
+
+// Searches every combination (one candidate per kind) in rank order for the conflict-free set
+// with the highest layout bound; pairs are compared once. The bound of a set is its largest
+// subset of consistent, pairwise rule-compatible routes (one rule follows a subset exactly
+// when every pair of its routes agrees at every layout both meet).
+SetSearch best_set(const std::vector<std::vector<Profile>>& profiles) {
+  const size_t kinds = profiles.size();
+  // free_of[a][b][i][j]: candidate i of kind a and j of kind b leave no approach by different
+  // exits; same_rule[...]: they agree at every shared layout.
+  using Table = std::vector<std::vector<char>>;
+  std::vector<std::vector<Table>> free_of(kinds, std::vector<Table>(kinds));
+  std::vector<std::vector<Table>> same_rule(kinds, std::vector<Table>(kinds));
+  for (size_t a = 0; a < kinds; ++a) {
+    for (size_t b = a + 1; b < kinds; ++b) {
+      free_of[a][b].assign(profiles[a].size(), std::vector<char>(profiles[b].size()));
+      same_rule[a][b].assign(profiles[a].size(), std::vector<char>(profiles[b].size()));
+      for (size_t i = 0; i < profiles[a].size(); ++i) {
+        for (size_t j = 0; j < profiles[b].size(); ++j) {
+          free_of[a][b][i][j] = agree(profiles[a][i].exits, profiles[b][j].exits);
+          same_rule[a][b][i][j] = agree(profiles[a][i].rule, profiles[b][j].rule);
+        }
+      }
+    }
+  }
+  SetSearch best;
+  std::vector<size_t> index(kinds, 0);
+  const auto bound_of = [&] {
+    int most = 0;
+    for (unsigned subset = 1; subset < (1u << kinds); ++subset) {
+      const int size = __builtin_popcount(subset);
+      if (size <= most) continue;
+      bool ok = true;
+      for (size_t a = 0; a < kinds && ok; ++a) {
+        if (!(subset & (1u << a))) continue;
+        ok = profiles[a][index[a]].consistent;
+        for (size_t b = a + 1; b < kinds && ok; ++b) {
+          if (subset & (1u << b)) ok = same_rule[a][b][index[a]][index[b]];
+        }
+      }
+      if (ok) most = size;
+    }
+    return most;
+  };
+  const std::function<bool(size_t)> search = [&](size_t kind) {
+    if (kind == kinds) {
+      const int followed = bound_of();
+      if (!best.found || followed > best.followed) best = SetSearch{true, index, followed};
+      return best.followed == static_cast<int>(kinds);  // nothing can beat all routes
+    }
+    for (size_t c = 0; c < profiles[kind].size(); ++c) {
+      bool fits = true;
+      for (size_t earlier = 0; earlier < kind && fits; ++earlier) {
+        fits = free_of[earlier][kind][index[earlier]][c];
+      }
+      if (!fits) continue;
+      index[kind] = c;
+      if (search(kind + 1)) return true;
+    }
+    return false;
+  };
+  search(0);
+  return best;
+}
+
 RouteSpec to_spec(const RoadNetwork& net, std::string name, bool loop,
                   const std::vector<int>& edges) {
   RouteSpec spec{std::move(name), loop, {}};
@@ -196,30 +300,28 @@ std::vector<RouteSpec> derive_routes(const RoadNetwork& net) {
                      "; use a network with closed blocks (loops need a ring of junctions) or "
                      "write a route file");
   }
-  // The first conflict-free set in rank order: the best straight corridor (longest) and loops
-  // (shortest) that allow conflict-free choices of the later kinds, found by a depth-first
-  // search over the candidates, kind by kind, with a bounded number of checks. When none is
-  // found the best candidate of each kind is kept and route_conflicts() reports the clashes.
+  // The set a route-blind policy can follow best: among the conflict-free sets of candidates
+  // (the first kCandidatesPerKind of each kind in rank order), one with the highest layout
+  // bound (layout_rule_bound(): the most routes one layout -> exit rule follows), the first in
+  // rank order among equals, so the best straight corridor (longest) and loops (shortest) are
+  // kept unless a later candidate lets a policy follow more routes. When no set is
+  // conflict-free the best candidate of each kind is kept and route_conflicts() reports the
+  // clashes.
   const auto spec_of = [&](size_t kind, const Candidate& candidate) {
     return to_spec(net, std::string(kRouteNames[kind]), kind > 0, candidate.edges);
   };
-  constexpr int kMaxChecks = 20000;
-  int checks = 0;
-  std::vector<RouteSpec> chosen;
-  const std::function<bool(size_t)> search = [&](size_t kind) {
-    if (kind == candidates.size()) return true;
-    for (const Candidate& candidate : candidates[kind]) {
-      if (++checks > kMaxChecks) return false;
-      chosen.push_back(spec_of(kind, candidate));
-      if (route_conflicts(chosen).empty() && search(kind + 1)) return true;
-      chosen.pop_back();
+  const size_t kinds = candidates.size();
+  std::vector<std::vector<Profile>> profiles(kinds);
+  for (size_t kind = 0; kind < kinds; ++kind) {
+    const size_t count = std::min(candidates[kind].size(), kCandidatesPerKind);
+    for (size_t c = 0; c < count; ++c) {
+      profiles[kind].push_back(profile_of(net, spec_of(kind, candidates[kind][c])));
     }
-    return false;
-  };
-  if (search(0)) return chosen;
-  chosen.clear();
-  for (size_t kind = 0; kind < candidates.size(); ++kind) {
-    chosen.push_back(spec_of(kind, candidates[kind].front()));
+  }
+  const SetSearch best = best_set(profiles);
+  std::vector<RouteSpec> chosen;
+  for (size_t kind = 0; kind < kinds; ++kind) {
+    chosen.push_back(spec_of(kind, candidates[kind][best.found ? best.index[kind] : 0]));
   }
   return chosen;
 }

@@ -124,7 +124,7 @@ TEST(Report, TheLayoutBoundRowCountsTheRoutesOneLayoutRuleFollows) {
   EXPECT_NE(md.find("| *layout bound* | 66.7 | - | |"), std::string::npos) << md;
   // Without choices there is no such row.
   EXPECT_EQ(render_markdown(report, "town01", "town02").find("layout bound"), std::string::npos);
-  // The built-in towns' own routes: one of four on each.
+  // The built-in towns' own routes: two of four on each (straight and right_loop).
   const TownChoices builtin = route_choices_of(report);
   ASSERT_EQ(builtin.size(), 2u);
   std::vector<EpisodeRecord> all;
@@ -134,7 +134,7 @@ TEST(Report, TheLayoutBoundRowCountsTheRoutesOneLayoutRuleFollows) {
     }
   }
   EXPECT_NE(render_markdown(aggregate(all), "town01", "town02", builtin)
-                .find("| *layout bound* | 25.0 | 25.0 | |"),
+                .find("| *layout bound* | 50.0 | 50.0 | |"),
             std::string::npos);
 }
 

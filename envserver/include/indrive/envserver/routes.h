@@ -164,9 +164,11 @@ std::vector<RouteSpec> read_route_file(const std::filesystem::path& path);
 void write_route_file(const std::filesystem::path& path, const std::vector<RouteSpec>& specs);
 // Finds the four standard routes in any network: the longest straight corridor, the smallest
 // loops of right turns (clockwise) and of left turns (counter-clockwise), and the smallest
-// loop with both; among the candidates of each kind (one per start edge) it takes the best
-// that keeps the set conflict-free (route_conflicts()), the best alone when none does. Throws
-// RouteError naming the route kinds the network does not allow.
+// loop with both. Among the conflict-free sets (route_conflicts()) of the candidates (the
+// first 48 of each kind in that order) it takes one whose layout bound (layout_rule_bound())
+// is highest, the first in rank order among equals, so a policy that sees no route can follow
+// as many as the network allows; the best candidate of each kind when no set is conflict-free.
+// Throws RouteError naming the route kinds the network does not allow.
 std::vector<RouteSpec> derive_routes(const RoadNetwork& net);
 // Builds a Route per spec; throws RouteError when a spec does not fit the network.
 std::vector<Route> build_routes(const RoadNetwork& net, const std::vector<RouteSpec>& specs);
