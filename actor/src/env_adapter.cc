@@ -19,6 +19,7 @@ env::EnvConfig env_config(const service::ServiceConfig& service, const agent::Ag
   env.camera.width = agent.world_model.image;
   env.camera.height = agent.world_model.image;
   env.events.time_limit_steps = config.get<int>("env.time_limit_steps");
+  env.town_options.route_set = config.get<std::string>("env.route_set");
   if (agent.phase != agent::Phase::kPretrain) env.task = agent.task;
   return env;
 }

@@ -264,7 +264,12 @@ Town load_town(const std::string& spec, const TownOptions& options) {
   std::vector<RouteSpec> specs;
   const auto towns = builtin_towns();
   if (std::find(towns.begin(), towns.end(), spec) != towns.end()) {
-    specs = read_route_file(data_dir(options) / "routes" / (spec + ".routes.yaml"));
+    if (std::find(kRouteSets.begin(), kRouteSets.end(), options.route_set) == kRouteSets.end()) {
+      throw MapError("unknown route set '" + options.route_set + "'; give right or left");
+    }
+    fs::path folder = data_dir(options) / "routes";
+    if (options.route_set != kRouteSets.front()) folder /= options.route_set;
+    specs = read_route_file(folder / (spec + ".routes.yaml"));
   } else {
     specs = derive_routes(net);
   }

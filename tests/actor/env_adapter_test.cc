@@ -48,6 +48,15 @@ TEST(EnvConfigTest, ThePresetSizesTheCameraAndTaskPhasesSetTheTask) {
       {.run_dir = dir.path() / "r",
        .overrides = {"agent.phase=finetune", "agent.task=collision_avoidance"}});
   EXPECT_EQ(env_config(task).task, "collision_avoidance");
+
+  EXPECT_EQ(env_config(pretrain).town_options.route_set, "right") << "the default route set";
+  const auto left = service::ServiceConfig::resolve(
+      {.run_dir = dir.path() / "l", .overrides = {"env.route_set=left"}});
+  EXPECT_EQ(env_config(left).town_options.route_set, "left");
+  EXPECT_THROW(service::ServiceConfig::resolve(
+                   {.run_dir = dir.path() / "m", .overrides = {"env.route_set=middle"}}),
+               std::exception)
+      << "only the shipped route sets";
 }
 
 // Every shipped config gives an environment, so a renamed env key cannot break a recipe.

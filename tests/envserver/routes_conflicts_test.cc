@@ -64,12 +64,12 @@ TEST(RouteConflictsTest, EveryShippedRouteFileIsConflictFree) {
   namespace fs = std::filesystem;
   const fs::path folder = fs::path(INDRIVE_SOURCE_DIR) / "envserver" / "data" / "routes";
   std::vector<fs::path> files;
-  for (const auto& entry : fs::directory_iterator(folder)) {
+  for (const auto& entry : fs::recursive_directory_iterator(folder)) {
     const std::string name = entry.path().filename().string();
     if (name.size() > 12 && name.ends_with(".routes.yaml")) files.push_back(entry.path());
   }
   std::sort(files.begin(), files.end());
-  ASSERT_GE(files.size(), 2u) << "no route files found under " << folder;
+  ASSERT_GE(files.size(), 4u) << "route files missing under " << folder << " (and left/)";
   for (const fs::path& file : files) {
     const std::vector<RouteSpec> specs = read_route_file(file);
     for (const RouteConflict& conflict : route_conflicts(specs)) {
@@ -79,7 +79,8 @@ TEST(RouteConflictsTest, EveryShippedRouteFileIsConflictFree) {
     const std::string town = file.filename().string().substr(0, file.filename().string().find('.'));
     const auto builtin = builtin_towns();
     if (std::find(builtin.begin(), builtin.end(), town) != builtin.end()) {
-      EXPECT_TRUE(route_conflicts(testing::cached_town(town).routes).empty()) << town;
+      const std::vector<Route> routes = build_routes(testing::cached_town(town).net, specs);
+      EXPECT_TRUE(route_conflicts(routes).empty()) << file;
     }
   }
 }
@@ -153,33 +154,39 @@ TEST(LayoutRuleBoundTest, ARouteThatTakesTwoExitsAtOneLayoutFollowsNoRule) {
 
 // The built-in towns' routes keep the paper's kinds (a straight road, a right loop, a left loop,
 // a loop with both turns) and, since 2026-12-04, a policy that picks its exit by layout can
-// follow two of the four, by the same rule on both towns (straight where the junction offers
-// it, else right; right where it offers right and straight): average SR up to 50%
-// (docs/architecture.md, section 9). The first routes allowed one (25%).
-TEST(LayoutRuleBoundTest, OneRuleFollowsStraightAndTheRightLoopOnBothBuiltInTowns) {
-  std::map<std::string, char> first_rule;
-  for (const std::string town_name : {"town01", "town02"}) {
-    const Town& town = testing::cached_town(town_name);
-    std::vector<std::string> names;
-    for (const Route& route : town.routes) names.push_back(route.name());
-    const std::vector<RouteChoice> choices = route_choices(town.net, town.routes);
-    for (const RouteChoice& choice : choices) {
-      if (choice.route != "straight") continue;
-      EXPECT_EQ(choice.layout, "ls") << town_name << " " << choice.approach;
-      EXPECT_EQ(choice.taken, 's') << town_name << " " << choice.approach;
-    }
-    const LayoutRuleBound bound = layout_rule_bound(names, choices);
-    EXPECT_EQ(bound.route_count, 4) << town_name;
-    EXPECT_EQ(bound.routes_followed, (std::vector<std::string>{"straight", "right_loop"}))
-        << town_name;
-    EXPECT_EQ(bound.lookalikes.size(), 3u) << town_name;  // {l,r}, {l,s}, {r,s}
-    if (first_rule.empty()) {
-      first_rule = bound.rule;
-    } else {
-      EXPECT_EQ(bound.rule, first_rule) << "town02's routes follow town01's rule";
+// follow two of the four, by the same rule on both towns: in the default set (right) "turn
+// right wherever the junction offers right, else go straight" follows straight and
+// right_loop; in the mirror set (left) "turn left wherever offered, else straight" follows
+// straight and left_loop. Average SR up to 50% (docs/architecture.md, section 9); the first
+// routes allowed one route (25%).
+TEST(LayoutRuleBoundTest, OneRuleFollowsStraightAndOneLoopOnBothBuiltInTowns) {
+  struct Set {
+    std::string name, loop;
+    std::map<std::string, char> rule;
+  };
+  for (const Set& set : {Set{"right", "right_loop", {{"lr", 'r'}, {"ls", 's'}, {"rs", 'r'}}},
+                         Set{"left", "left_loop", {{"lr", 'l'}, {"ls", 'l'}, {"rs", 's'}}}}) {
+    for (const std::string town_name : {"town01", "town02"}) {
+      const Town town = load_town(town_name, TownOptions{.route_set = set.name});
+      std::vector<std::string> names;
+      for (const Route& route : town.routes) names.push_back(route.name());
+      EXPECT_EQ(names,
+                (std::vector<std::string>{"straight", "right_loop", "left_loop", "two_turn"}));
+      const std::vector<RouteChoice> choices = route_choices(town.net, town.routes);
+      for (const RouteChoice& choice : choices) {
+        if (choice.route != "straight") continue;
+        EXPECT_EQ(choice.layout, set.name == "right" ? "ls" : "rs") << town_name << " " << set.name;
+        EXPECT_EQ(choice.taken, 's') << town_name << " " << choice.approach;
+      }
+      const LayoutRuleBound bound = layout_rule_bound(names, choices);
+      EXPECT_EQ(bound.route_count, 4) << town_name;
+      EXPECT_EQ(bound.routes_followed, (std::vector<std::string>{"straight", set.loop}))
+          << town_name << " " << set.name;
+      EXPECT_EQ(bound.rule, set.rule) << town_name << " " << set.name;
+      EXPECT_TRUE(route_conflicts(town.routes).empty()) << town_name << " " << set.name;
     }
   }
-  EXPECT_EQ(first_rule, (std::map<std::string, char>{{"lr", 'r'}, {"ls", 's'}, {"rs", 'r'}}));
+  EXPECT_THROW(load_town("town01", TownOptions{.route_set = "middle"}), MapError);
 }
 
 // Why two and not four: over every route of each kind the built-in towns allow (every simple

@@ -84,6 +84,9 @@ void declare_service_schema(config::Schema& schema) {
       .add_int("env.density_period_steps", 10000, "env steps between density draws", 1)
       .add_int("env.time_limit_steps", 1000, "episode length limit in steps", 1)
       .add_string("env.route", "", "route of the task phases; empty: random spawns without a route")
+      .add_choice("env.route_set", "right", {"right", "left"},
+                  "built-in towns' routes: right (one layout rule follows straight and "
+                  "right_loop) or left, the mirror design (straight and left_loop)")
       .add_float("env.coverage_segment_m", 10.0,
                  "length of the lane pieces the exploration coverage counts", 0.5);
   schema.add_int("actor.chunk_length", 64, "steps per TrajectoryChunk (L)", 1, 4096)

@@ -39,8 +39,8 @@ constexpr const char* kUsage = R"(usage:
                       [--target-speed 5] [--size 128] [--mode libsumo|libtraci]
                       [--task lane_following|collision_avoidance] [--video out.mp4]
                       [--quiet]
-  indrive-env routes --town town01 --out town01.png
-      (lists the routes, warns of any approach two routes leave by different exits, and
+  indrive-env routes --town town01 --out town01.png [--route-set right|left]
+      (lists the routes of the route set (env.route_set), warns of any approach two routes leave by different exits, and
        bounds what a policy that sees no route can follow: junctions that offer the same
        exits but where routes take different ones)
 Routes: straight, right_loop, left_loop, two_turn (empty: random spawn, no route).
@@ -91,8 +91,10 @@ void reject_leftovers(const std::map<std::string, std::string>& flags) {
 int run_routes(std::map<std::string, std::string> flags) {
   const std::string town_name = take(flags, "town", "town01");
   const std::string out = take(flags, "out", town_name + ".png");
+  TownOptions options;
+  options.route_set = take(flags, "route-set", "right");
   reject_leftovers(flags);
-  const Town town = load_town(town_name);
+  const Town town = load_town(town_name, options);
   draw_town(town.net, town.routes, town.spawns, out);
   std::printf("%s: %zu lanes, %zu routes, %zu spawn points -> %s\n", town_name.c_str(),
               town.net.lanes().size(), town.routes.size(), town.spawns.size(), out.c_str());

@@ -15,8 +15,10 @@
 //   draw_town(town.net, town.routes, town.spawns, "town01.png");
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "indrive/envserver/net.h"
@@ -36,7 +38,14 @@ struct TownOptions {
   // netconvert / netgenerate programs; empty: the ones found at build time.
   std::filesystem::path netconvert;
   std::filesystem::path netgenerate;
+  // Route set of the built-in towns (routes/ for "right", routes/<set>/ otherwise): "right"
+  // ships routes one layout rule follows with straight and right_loop, "left" the mirror
+  // design (straight and left_loop); see kRouteSets and docs/architecture.md section 9.
+  std::string route_set = "right";
 };
+
+// The route sets of the built-in towns, the default first.
+inline constexpr std::array<std::string_view, 2> kRouteSets = {"right", "left"};
 
 // The built-in town names.
 std::vector<std::string> builtin_towns();
