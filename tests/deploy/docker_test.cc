@@ -128,7 +128,7 @@ TEST_F(InstalledTest, InstallPutsProgramsAndDataUnderThePrefix) {
        {"deploy/dds/single_host.xml", "deploy/dds/default.xml", "deploy/dds/discovery_server.xml",
         "deploy/configs/smoke.yaml", "deploy/configs/pretrain_disag.yaml",
         "envserver/data/towns/town01.nod.xml", "envserver/data/routes/town02.routes.yaml",
-        "deploy/docker/entrypoint.sh"}) {
+        "envserver/data/routes/left/town01.routes.yaml", "deploy/docker/entrypoint.sh"}) {
     EXPECT_TRUE(fs::is_regular_file(share() / file)) << file;
   }
   // The scripts a user runs from the installed tree are executable.

@@ -1,5 +1,6 @@
 // A route file (YAML: name -> {loop, edges}) read and built on town01's network, as a town's
 // routes are loaded.
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 
@@ -15,8 +16,12 @@ using namespace indrive;
 void make_seeds(const fuzz::fs::path& dir) {
   const fuzz::fs::path routes =
       fuzz::fs::path(INDRIVE_SOURCE_DIR) / "envserver" / "data" / "routes";
-  for (const auto& entry : fuzz::fs::directory_iterator(routes)) {
-    fuzz::write_seed(dir, entry.path().filename().string(), fuzz::read_text(entry.path()));
+  // Every shipped route file, the route sets' subfolders (left/) included.
+  for (const auto& entry : fuzz::fs::recursive_directory_iterator(routes)) {
+    if (!entry.is_regular_file()) continue;
+    std::string name = entry.path().lexically_relative(routes).string();
+    std::replace(name.begin(), name.end(), '/', '-');
+    fuzz::write_seed(dir, name, fuzz::read_text(entry.path()));
   }
 }
 
