@@ -29,8 +29,9 @@
 # Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
 # --task-steps N (10000), --episodes N per town x route x density (5), --stages "pretrain
 # zeroshot fewshot" (a chain's stages), --task T (dreamer's task; a chain's fewshot then does
-# only T), --fewshot-ratio N (512), --set KEY=VALUE for every training run (repeatable),
-# --page DIR and --snapshot-seeds "S ..." (publish).
+# only T), --fewshot-ratio N (512), --route-set right|left (env.route_set of every run and
+# evaluation: the built-in towns' route set, right by default), --set KEY=VALUE for every
+# training run (repeatable), --page DIR and --snapshot-seeds "S ..." (publish).
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -46,11 +47,12 @@ method=disag
 task=lane_following
 tasks="lane_following collision_avoidance"  # of a chain's fewshot stage; --task picks one
 stages="pretrain zeroshot fewshot"
+route_set=right
 extra=()
 page=""
 snapshot_seeds=0
 
-usage() { sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,34p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -68,6 +70,7 @@ while [[ $# -gt 0 ]]; do
     --method) method=$2; shift 2 ;;
     --task) task=$2; tasks=$2; shift 2 ;;
     --stages) stages=$2; shift 2 ;;
+    --route-set) route_set=$2; shift 2 ;;
     --set) extra+=(--set "$2"); shift 2 ;;
     --page) page=$2; shift 2 ;;
     --snapshot-seeds) snapshot_seeds=$2; shift 2 ;;
@@ -77,6 +80,9 @@ while [[ $# -gt 0 ]]; do
 done
 case $method in disag|icm|rnd|random) ;; *)
   echo "--method must be disag, icm, rnd or random, got '$method'" >&2; exit 2 ;;
+esac
+case $route_set in right|left) ;; *)
+  echo "--route-set must be right or left, got '$route_set'" >&2; exit 2 ;;
 esac
 case $task in lane_following|collision_avoidance) ;; *)
   echo "--task must be lane_following or collision_avoidance, got '$task'" >&2; exit 2 ;;
@@ -89,7 +95,8 @@ export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-
 say() { printf '\033[1m[grid %s]\033[0m %s\n' "$(date +%H:%M:%S)" "$*"; }
 seed_dir="$out/s$seed"
 mkdir -p "$seed_dir"
-common=(--set "preset=$preset" --set "run.seed=$seed" ${extra[@]+"${extra[@]}"})
+common=(--set "preset=$preset" --set "run.seed=$seed" --set "env.route_set=$route_set"
+  ${extra[@]+"${extra[@]}"})
 short() { [[ $1 == lane_following ]] && echo lf || echo ca; }
 config_of() { # phase task -> config file
   case $1 in
@@ -128,6 +135,7 @@ evaluate() { # eval_dir kind snapshot|random [--set ...]: the method and task th
     "$bin/indrive-actor" --evaluate "${policy[@]}" --run-dir "$dir" --id "$j" --of 2 \
       --set "preset=$preset" --set "run.seed=$seed" --set "eval.kind=$kind" \
       --set "eval.episodes_per_cell=$episodes" --set "eval.towns=town01,town02" \
+      --set "env.route_set=$route_set" \
       "$@" --log-level warn > "$dir/evaluator-$j.log" 2>&1 &
     pids+=($!)
   done
