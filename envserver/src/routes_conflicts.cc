@@ -120,6 +120,15 @@ std::vector<RouteChoice> route_choices(const RoadNetwork& net, const std::vector
   return route_choices(net, specs_of(routes));
 }
 
+std::optional<std::map<std::string, char>> layout_rule_of(const std::vector<RouteChoice>& choices) {
+  std::map<std::string, char> rule;
+  for (const RouteChoice& choice : choices) {
+    const auto [it, inserted] = rule.emplace(choice.layout, choice.taken);
+    if (!inserted && it->second != choice.taken) return std::nullopt;
+  }
+  return rule;
+}
+
 LayoutRuleBound layout_rule_bound(const std::vector<std::string>& names,
                                   const std::vector<RouteChoice>& choices) {
   std::vector<std::string> routes = names;
@@ -131,13 +140,17 @@ LayoutRuleBound layout_rule_bound(const std::vector<std::string>& names,
   const int n = static_cast<int>(routes.size());
   if (n > 20) throw RouteError("layout_rule_bound: more than 20 routes");
   // Each route's own rule; a route that takes two exits at one layout follows no rule.
+  std::vector<std::vector<RouteChoice>> by_route(n);
+  for (const RouteChoice& choice : choices) {
+    by_route[std::find(routes.begin(), routes.end(), choice.route) - routes.begin()].push_back(
+        choice);
+  }
   std::vector<std::map<std::string, char>> own(n);
   std::vector<bool> consistent(n, true);
-  for (const RouteChoice& choice : choices) {
-    const int r =
-        static_cast<int>(std::find(routes.begin(), routes.end(), choice.route) - routes.begin());
-    const auto [it, inserted] = own[r].emplace(choice.layout, choice.taken);
-    if (!inserted && it->second != choice.taken) consistent[r] = false;
+  for (int r = 0; r < n; ++r) {
+    const auto rule = layout_rule_of(by_route[r]);
+    consistent[r] = rule.has_value();
+    if (rule) own[r] = *rule;
   }
   LayoutRuleBound bound;
   bound.route_count = n;

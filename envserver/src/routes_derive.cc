@@ -184,10 +184,9 @@ Profile profile_of(const RoadNetwork& net, const RouteSpec& spec) {
   const size_t n = spec.edges.size();
   const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
   for (size_t i = 0; i < pairs; ++i) profile.exits.emplace(spec.edges[i], spec.edges[(i + 1) % n]);
-  for (const RouteChoice& choice : route_choices(net, {spec})) {
-    const auto [it, inserted] = profile.rule.emplace(choice.layout, choice.taken);
-    if (!inserted && it->second != choice.taken) profile.consistent = false;
-  }
+  const auto rule = layout_rule_of(route_choices(net, {spec}));
+  profile.consistent = rule.has_value();
+  if (rule) profile.rule = *rule;
   return profile;
 }
 

@@ -141,6 +141,13 @@ TEST(LayoutRuleBoundTest, RoutesTakingDifferentExitsAtOneLayoutAreNotBothFollowe
   EXPECT_THAT(bound.lookalikes[0], HasSubstr("right turns right (c)"));
 }
 
+TEST(LayoutRuleBoundTest, ARoutesRuleIsItsExitPerLayoutUnlessItTakesTwo) {
+  EXPECT_EQ(layout_rule_of({{"r", "a", "lr", 'l'}, {"r", "b", "rs", 's'}, {"r", "c", "lr", 'l'}}),
+            (std::map<std::string, char>{{"lr", 'l'}, {"rs", 's'}}));
+  EXPECT_FALSE(layout_rule_of({{"r", "a", "lr", 'l'}, {"r", "b", "lr", 'r'}}).has_value());
+  EXPECT_EQ(layout_rule_of({}), (std::map<std::string, char>{}));
+}
+
 TEST(LayoutRuleBoundTest, ARouteThatTakesTwoExitsAtOneLayoutFollowsNoRule) {
   const LayoutRuleBound bound =
       layout_rule_bound({"zigzag"}, {{"zigzag", "a", "lr", 'l'}, {"zigzag", "b", "lr", 'r'}});
@@ -227,12 +234,8 @@ TEST(LayoutRuleBoundTest, NoRuleFollowsMoreThanTwoRouteKindsOnTheBuiltInTowns) {
       if (loop && lefts > 0 && rights > 0) kind = "two_turn";
       if (kind.empty()) return;
       kinds_found.insert(kind);
-      Found found{kind, {}};
-      for (const RouteChoice& choice : route_choices(net, {spec})) {
-        const auto [it, inserted] = found.rule.emplace(choice.layout, choice.taken);
-        if (!inserted && it->second != choice.taken) return;
-      }
-      routes.push_back(std::move(found));
+      const auto rule = layout_rule_of(route_choices(net, {spec}));
+      if (rule) routes.push_back(Found{kind, *rule});
     };
     std::vector<int> path;
     std::vector<bool> on_path(n, false);

@@ -18,6 +18,7 @@
 #include <array>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -214,6 +215,10 @@ struct RouteChoice {
 // Throws RouteError when a route's consecutive edges are not connected in `net`.
 std::vector<RouteChoice> route_choices(const RoadNetwork& net, const std::vector<RouteSpec>& specs);
 std::vector<RouteChoice> route_choices(const RoadNetwork& net, const std::vector<Route>& routes);
+
+// The layout -> exit rule (direction code) that `choices` make, all of them taken as one
+// route's; nullopt when they take two exits at one layout (no rule follows such a route).
+std::optional<std::map<std::string, char>> layout_rule_of(const std::vector<RouteChoice>& choices);
 
 // What a policy deciding by junction layout alone can follow of a set of routes.
 struct LayoutRuleBound {
