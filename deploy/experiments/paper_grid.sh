@@ -11,7 +11,8 @@
 #             method page's few-shot rows were made at 32), each evaluated like the zero-shot;
 #   dreamer   DreamerV3 from scratch on a task for the same total budget (pretrain + task
 #             steps), evaluated the same way;
-#   report    `indrive report` over every evaluation under --out (Tables III-VI, 95% CIs);
+#   report    `indrive report` over every evaluation under --out (Tables III-VI, 95% CIs;
+#             the layout bound on --route-set's routes);
 #   publish   what must outlast the machine, into a committed results page (--page DIR):
 #             metrics, configs, evaluation CSVs, the report, and the acting snapshots of the
 #             seeds in --snapshot-seeds ("0").
@@ -52,7 +53,7 @@ extra=()
 page=""
 snapshot_seeds=0
 
-usage() { sed -n '2,34p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,35p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -238,13 +239,13 @@ PY
     done
     rmdir "$page/snapshots" 2> /dev/null || true
     "$0" summary --out "$out" --bin "$bin" > "$page/pretrain-summary.md"
-    "$bin/indrive" report "$page/eval" --out "$page" > /dev/null
+    "$bin/indrive" report "$page/eval" --out "$page" --route-set "$route_set" > /dev/null
     say "published $out into $page: $(find "$page/runs" -mindepth 1 -maxdepth 1 | wc -l) runs, $(find "$page/eval" -name '*.csv' | wc -l) evaluation files"
     ;;
   report)
     mapfile -t dirs < <(find "$out" -mindepth 2 -maxdepth 2 -type d \( -name 'zeroshot-*' -o -name 'fewshot-*' \) | sort)
     [[ ${#dirs[@]} -gt 0 ]] || { echo "no evaluations under $out yet" >&2; exit 1; }
-    "$bin/indrive" report "${dirs[@]}" --out "$out/report"
+    "$bin/indrive" report "${dirs[@]}" --out "$out/report" --route-set "$route_set"
     ;;
   *) echo "unknown command '$command': chain, dreamer, summary, publish or report (see --help)" >&2; exit 2 ;;
 esac

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
@@ -22,6 +23,7 @@
 #include "indrive/deploy/launch.h"
 #include "indrive/deploy/plot.h"
 #include "indrive/deploy/report.h"
+#include "indrive/envserver/town.h"
 
 namespace fs = std::filesystem;
 
@@ -209,6 +211,14 @@ int main(int argc, char** argv) {
   report_cmd->add_option("--seen-town", seen_town, "training town for the gap")
       ->capture_default_str();
   report_cmd->add_option("--heldout-town", heldout_town, "held-out town for the gap")
+      ->capture_default_str();
+  std::string report_route_set = "right";
+  report_cmd
+      ->add_option("--route-set", report_route_set,
+                   "env.route_set the evaluations ran with: the layout bound row is computed on "
+                   "the built-in towns' routes of this set")
+      ->check(CLI::IsMember(std::vector<std::string>(indrive::env::kRouteSets.begin(),
+                                                     indrive::env::kRouteSets.end())))
       ->capture_default_str();
 
   fs::path plot_run;
@@ -398,8 +408,9 @@ int main(int argc, char** argv) {
       fs::create_directories(report_out);
       indrive::atomic_write(
           report_out / "report.md",
-          indrive::deploy::render_markdown(report, seen_town, heldout_town,
-                                           indrive::deploy::route_choices_of(report)));
+          indrive::deploy::render_markdown(
+              report, seen_town, heldout_town,
+              indrive::deploy::route_choices_of(report, report_route_set), report_route_set));
       indrive::atomic_write(report_out / "report.csv", indrive::deploy::render_csv(report));
       indrive::atomic_write(report_out / "report.tex", indrive::deploy::render_latex(report));
       std::printf("%d episodes from %zu run(s) -> %s/report.md (.csv, .tex)\n", report.episodes,

@@ -180,27 +180,37 @@ double average_over_routes(const Table& table, const std::string& method, const 
   return sum / static_cast<double>(t->second.size());
 }
 
-TownChoices route_choices_of(const Report& report) {
-  // Loaded once per town and process (a live dashboard asks on every refresh); a town that
-  // does not load is remembered as such.
+TownChoices route_choices_of(const Report& report, const std::string& route_set) {
+  if (std::find(env::kRouteSets.begin(), env::kRouteSets.end(), route_set) ==
+      env::kRouteSets.end()) {
+    throw std::invalid_argument("unknown route set '" + route_set +
+                                "': give the env.route_set the evaluations ran with, right "
+                                "(the default) or left");
+  }
+  // Loaded once per (route set, town) and process (a live dashboard asks on every refresh); a
+  // town that does not load is remembered as such.
   static std::mutex mutex;
-  static std::map<std::string, std::optional<std::vector<env::RouteChoice>>> cache;
+  static std::map<std::pair<std::string, std::string>, std::optional<std::vector<env::RouteChoice>>>
+      cache;
   std::set<std::string> towns;
   for (const auto& [key, table] : report.tables)
     towns.insert(table.towns.begin(), table.towns.end());
   TownChoices choices;
   const std::lock_guard<std::mutex> lock(mutex);
   for (const std::string& name : towns) {
-    auto it = cache.find(name);
+    const auto key = std::make_pair(route_set, name);
+    auto it = cache.find(key);
     if (it == cache.end()) {
       std::optional<std::vector<env::RouteChoice>> loaded;
       try {
-        const env::Town town = env::load_town(name);
+        env::TownOptions options;
+        options.route_set = route_set;
+        const env::Town town = env::load_town(name, options);
         loaded = env::route_choices(town.net, town.routes);
       } catch (const std::exception&) {
         // A town this machine cannot load (a network file elsewhere): no bound for it.
       }
-      it = cache.emplace(name, std::move(loaded)).first;
+      it = cache.emplace(key, std::move(loaded)).first;
     }
     if (it->second) choices[name] = *it->second;
   }
@@ -208,7 +218,8 @@ TownChoices route_choices_of(const Report& report) {
 }
 
 std::string render_markdown(const Report& report, const std::string& seen_town,
-                            const std::string& heldout_town, const TownChoices& choices) {
+                            const std::string& heldout_town, const TownChoices& choices,
+                            const std::string& route_set) {
   std::ostringstream md;
   md << "# Results\n\n"
      << report.episodes << " episodes from " << report.runs.size() << " run(s). SR = % of "
@@ -286,8 +297,10 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
       }
       if (has_gap) md << " |";
       md << "\n\n*layout bound*: the highest average SR over these routes of a policy that sees "
-            "no route and picks its exit by the exits a junction offers (`indrive-env routes` "
-            "lists the look-alike junctions).\n";
+            "no route and picks its exit by the exits a junction offers, on the built-in "
+            "towns' route set `"
+         << route_set << "` (`indrive-env routes --route-set " << route_set
+         << "` lists the look-alike junctions).\n";
     }
     // Route completion: how far the policies get, where SR only says whether they arrive.
     md << "\n### Mean route completion (%)\n\n| method | town |";

@@ -138,6 +138,32 @@ TEST(Report, TheLayoutBoundRowCountsTheRoutesOneLayoutRuleFollows) {
             std::string::npos);
 }
 
+TEST(Report, TheLayoutBoundIsTakenFromTheRouteSetTheEvaluationsRanWith) {
+  std::vector<EpisodeRecord> records;
+  for (const std::string town : {"town01", "town02"}) {
+    for (const std::string route : {"straight", "right_loop", "left_loop", "two_turn"}) {
+      add_episodes(records, "disag", 0, town, route, 10, 1, 0, "off_route");
+    }
+  }
+  const Report report = aggregate(records);
+  const std::vector<std::string> routes = {"straight", "right_loop", "left_loop", "two_turn"};
+  // The default set's rule follows straight and right_loop, the mirror set's straight and
+  // left_loop: the choices come from the set asked for.
+  for (const auto& [set, loop] : std::vector<std::pair<std::string, std::string>>{
+           {"right", "right_loop"}, {"left", "left_loop"}}) {
+    const TownChoices choices = route_choices_of(report, set);
+    ASSERT_EQ(choices.size(), 2u) << set;
+    for (const auto& [town, town_choices] : choices) {
+      const auto bound = env::layout_rule_bound(routes, town_choices);
+      EXPECT_EQ(bound.routes_followed, (std::vector<std::string>{"straight", loop}))
+          << set << " " << town;
+    }
+    const std::string md = render_markdown(report, "town01", "town02", choices, set);
+    EXPECT_NE(md.find("route set `" + set + "`"), std::string::npos) << md;
+  }
+  EXPECT_THROW(route_choices_of(report, "middle"), std::invalid_argument);
+}
+
 TEST(Report, FailureColumnsFollowTheEventOrderOffRouteIncluded) {
   std::vector<EpisodeRecord> records;
   add_episodes(records, "icm", 0, "town01", "right_loop", 10, 3, 0, "off_route");

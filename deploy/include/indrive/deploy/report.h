@@ -71,14 +71,18 @@ double average_over_routes(const Table& table, const std::string& method, const 
 // junction's layout reaches on average over the routes a table holds (envserver/routes.h).
 using TownChoices = std::map<std::string, std::vector<env::RouteChoice>>;
 
-// The choices of every town in `report` that loads (built-in towns, network files); towns
-// that do not load are left out (their bound cell reads "-").
-TownChoices route_choices_of(const Report& report);
+// The choices of every town in `report` that loads (built-in towns, network files), with the
+// built-in towns' route set `route_set` (env.route_set: "right" or "left"; the evaluations'
+// CSVs do not record it); towns that do not load are left out (their bound cell reads "-").
+// Throws std::invalid_argument for an unknown route set.
+TownChoices route_choices_of(const Report& report, const std::string& route_set = "right");
 
 // Renders the tables. `seen_town`/`heldout_town` name the generalisation-gap columns; towns
-// in `choices` get a layout-bound row under the averages.
+// in `choices` get a layout-bound row under the averages, whose note names `route_set` (the
+// set the choices were taken from).
 std::string render_markdown(const Report& report, const std::string& seen_town,
-                            const std::string& heldout_town, const TownChoices& choices = {});
+                            const std::string& heldout_town, const TownChoices& choices = {},
+                            const std::string& route_set = "right");
 std::string render_latex(const Report& report);
 std::string render_csv(const Report& report);
 
