@@ -10,15 +10,6 @@
 namespace indrive::env {
 namespace {
 
-// Calls visit(approach, exit) for each consecutive edge pair of a route, a loop's closing pair
-// (last -> first) included: the junction choices both rules below look at.
-template <typename Visit>
-void for_each_approach(const RouteSpec& spec, Visit&& visit) {
-  const size_t n = spec.edges.size();
-  const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
-  for (size_t i = 0; i < pairs; ++i) visit(spec.edges[i], spec.edges[(i + 1) % n]);
-}
-
 std::vector<RouteSpec> specs_of(const std::vector<Route>& routes) {
   std::vector<RouteSpec> specs;
   specs.reserve(routes.size());
@@ -27,6 +18,16 @@ std::vector<RouteSpec> specs_of(const std::vector<Route>& routes) {
 }
 
 }  // namespace
+
+std::vector<std::pair<std::string, std::string>> route_approaches(const RouteSpec& spec) {
+  const size_t n = spec.edges.size();
+  const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
+  std::vector<std::pair<std::string, std::string>> approaches;
+  approaches.reserve(pairs);
+  for (size_t i = 0; i < pairs; ++i)
+    approaches.emplace_back(spec.edges[i], spec.edges[(i + 1) % n]);
+  return approaches;
+}
 
 std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs) {
   struct Seen {
@@ -37,10 +38,10 @@ std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs) 
   std::set<std::pair<std::string, std::string>> reported;  // (approach, clashing exit)
   std::vector<RouteConflict> conflicts;
   for (const RouteSpec& spec : specs) {
-    for_each_approach(spec, [&](const std::string& approach, const std::string& exit) {
+    for (const auto& [approach, exit] : route_approaches(spec)) {
       const auto [it, inserted] = first_exit.emplace(approach, Seen{spec.name, exit});
-      if (inserted || it->second.exit == exit) return;
-      if (!reported.emplace(approach, exit).second) return;
+      if (inserted || it->second.exit == exit) continue;
+      if (!reported.emplace(approach, exit).second) continue;
       RouteConflict conflict;
       conflict.approach = approach;
       conflict.route_a = it->second.route;
@@ -51,7 +52,7 @@ std::vector<RouteConflict> route_conflicts(const std::vector<RouteSpec>& specs) 
                          conflict.exit_a + ", " + conflict.route_b + " to " + conflict.exit_b +
                          " (a policy that sees no route cannot follow both)";
       conflicts.push_back(std::move(conflict));
-    });
+    }
   }
   return conflicts;
 }
@@ -87,7 +88,7 @@ std::vector<RouteChoice> route_choices(const RoadNetwork& net,
                                        const std::vector<RouteSpec>& specs) {
   std::vector<RouteChoice> choices;
   for (const RouteSpec& spec : specs) {
-    for_each_approach(spec, [&](const std::string& approach, const std::string& exit) {
+    for (const auto& [approach, exit] : route_approaches(spec)) {
       const int edge = net.find_edge(approach);
       if (edge < 0) throw RouteError("route " + spec.name + ": no edge '" + approach + "'");
       std::map<std::string, char> exits;  // exit edge id -> direction code
@@ -108,10 +109,10 @@ std::vector<RouteChoice> route_choices(const RoadNetwork& net,
       for (const auto& [id, code] : exits) {
         if (layout.find(code) == std::string::npos) layout += code;
       }
-      if (layout.size() < 2) return;  // one way on: no choice
+      if (layout.size() < 2) continue;  // one way on: no choice
       std::sort(layout.begin(), layout.end());
       choices.push_back(RouteChoice{spec.name, approach, layout, taken->second});
-    });
+    }
   }
   return choices;
 }

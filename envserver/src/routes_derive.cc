@@ -181,9 +181,7 @@ struct Profile {
 
 Profile profile_of(const RoadNetwork& net, const RouteSpec& spec) {
   Profile profile;
-  const size_t n = spec.edges.size();
-  const size_t pairs = spec.loop ? n : (n == 0 ? 0 : n - 1);
-  for (size_t i = 0; i < pairs; ++i) profile.exits.emplace(spec.edges[i], spec.edges[(i + 1) % n]);
+  for (auto& [approach, exit] : route_approaches(spec)) profile.exits.emplace(approach, exit);
   const auto rule = layout_rule_of(route_choices(net, {spec}));
   profile.consistent = rule.has_value();
   if (rule) profile.rule = *rule;

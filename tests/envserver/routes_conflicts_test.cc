@@ -17,6 +17,16 @@ namespace {
 
 using ::testing::HasSubstr;
 
+TEST(RouteConflictsTest, ApproachesAreTheConsecutiveEdgePairsWithALoopsClosingPair) {
+  using Pairs = std::vector<std::pair<std::string, std::string>>;
+  EXPECT_EQ(route_approaches({"corridor", false, {"a", "b", "c"}}),
+            (Pairs{{"a", "b"}, {"b", "c"}}));
+  EXPECT_EQ(route_approaches({"loop", true, {"a", "b", "c"}}),
+            (Pairs{{"a", "b"}, {"b", "c"}, {"c", "a"}}));
+  EXPECT_TRUE(route_approaches({"one edge", false, {"a"}}).empty());
+  EXPECT_TRUE(route_approaches({"empty", true, {}}).empty());
+}
+
 TEST(RouteConflictsTest, OppositeExitsOfOneApproachAreReportedWithBothRoutes) {
   // Two loops share the approach "in" and leave it to the right and to the left.
   const std::vector<RouteSpec> specs = {

@@ -187,6 +187,10 @@ struct RouteConflict {
   std::string exit_b;    // ... leaving by another edge
   std::string message;   // one line naming all of the above
 };
+// The approaches a route drives, in order: each consecutive edge pair (approach edge, exit
+// edge), a loop's closing pair (last -> first) included.
+std::vector<std::pair<std::string, std::string>> route_approaches(const RouteSpec& spec);
+
 // The conflicts of a set of routes. An approach is a consecutive edge pair (in -> out) of a
 // route, a loop's closing pair (last -> first) included; the set is conflict-free when no
 // incoming edge is left by two different exits across all routes. Each (approach, exit)
