@@ -1,5 +1,7 @@
 #include "indrive/deploy/dashboard.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include <algorithm>
 #include <charconv>
 #include <chrono>
@@ -10,12 +12,14 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/videoio.hpp>
+#include <set>
 #include <sstream>
 
 #include "indrive/basics/episode_csv.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
 #include "indrive/deploy/report.h"
+#include "indrive/envserver/town.h"
 
 namespace indrive::deploy {
 namespace fs = std::filesystem;
@@ -511,6 +515,32 @@ constexpr const char* kScript = R"js(
 })();
 )js";
 
+// The built-in towns' route set the runs ran with: env.route_set of each run's resolved
+// config.yaml (right, the default, where a run has none). Empty when the runs disagree or name
+// a set this build does not know: then no one set's layout bound describes the tables.
+std::string route_set_of(const std::vector<fs::path>& runs) {
+  std::set<std::string> sets;
+  for (const auto& run : runs) {
+    std::string set = "right";
+    const fs::path path = run / "config.yaml";
+    if (fs::exists(path)) {
+      try {
+        const YAML::Node config = YAML::LoadFile(path.string());
+        if (config["env"] && config["env"]["route_set"]) {
+          set = config["env"]["route_set"].as<std::string>();
+        }
+      } catch (const YAML::Exception&) {
+        // Not readable YAML: the page still shows it as text below; the default set.
+      }
+    }
+    if (std::find(env::kRouteSets.begin(), env::kRouteSets.end(), set) == env::kRouteSets.end()) {
+      return "";
+    }
+    sets.insert(set);
+  }
+  return sets.size() == 1 ? *sets.begin() : "";
+}
+
 }  // namespace
 
 std::string local_time_now() {
@@ -637,8 +667,10 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   html << "<section id=\"tables\"><h2>Tables</h2>\n";
   try {
     const Report report = aggregate(load_results(all_runs));
-    html << markdown_to_html(
-        render_markdown(report, input.seen_town, input.heldout_town, route_choices_of(report)));
+    const std::string route_set = route_set_of(all_runs);
+    html << markdown_to_html(render_markdown(
+        report, input.seen_town, input.heldout_town,
+        route_set.empty() ? TownChoices{} : route_choices_of(report, route_set), route_set));
   } catch (const CsvError&) {  // load_results: no episode in any eval/*.csv yet
     html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
   }

@@ -237,6 +237,22 @@ TEST(Dashboard, WhatIsNotARunIsAnErrorThatSaysWhatARunIs) {
   EXPECT_NE(corrupt.find("metrics.jsonl:6: not JSON"), std::string::npos) << corrupt;
 }
 
+TEST(Dashboard, TheLayoutBoundIsTakenFromTheRouteSetTheRunsRanWith) {
+  testing::TempDir dir;
+  const fs::path right = write_run(dir.path() / "right", 4, 1.0);  // no env.route_set: right
+  const fs::path left = write_run(dir.path() / "left", 4, 1.0);
+  std::ofstream(left / "config.yaml") << "env:\n  town: town01\n  route_set: left\n";
+  const auto page = [&](std::vector<fs::path> runs) {
+    return render_dashboard({.runs = {{.label = "runs", .runs = std::move(runs)}}}, dir.path());
+  };
+  EXPECT_NE(page({right}).find("route set `right`"), std::string::npos);
+  EXPECT_NE(page({left}).find("route set `left`"), std::string::npos);
+  // Runs on different sets: no one bound describes the tables, so there is no such row.
+  const std::string mixed = page({right, left});
+  EXPECT_NE(mixed.find("<th>straight SR</th>"), std::string::npos);
+  EXPECT_EQ(mixed.find("layout bound"), std::string::npos);
+}
+
 TEST(Dashboard, ARunWithOnlyAConfigStillGetsAPage) {
   testing::TempDir dir;
   fs::create_directories(dir.path() / "new");

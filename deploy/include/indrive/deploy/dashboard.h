@@ -12,7 +12,8 @@
 //   curves grouped by what they measure (world model, intrinsic module, behaviour, exploration,
 //   throughput and pacing, dropped messages by reason, evaluation SR and route completion over
 //   env steps), with hover values and drag-to-zoom; the report's tables over the runs'
-//   evaluation CSVs; the coverage map and town maps found in <run>/plots/; the videos of
+//   evaluation CSVs (the layout bound row on the route set of the runs' env.route_set, none
+//   when they differ); the coverage map and town maps found in <run>/plots/; the videos of
 //   <run>/videos/; the resolved config.yaml; the processes' last states (<run>/status.json,
 //   written by `indrive launch`).
 #pragma once
