@@ -521,7 +521,7 @@ constexpr const char* kScript = R"js(
 std::string route_set_of(const std::vector<fs::path>& runs) {
   std::set<std::string> sets;
   for (const auto& run : runs) {
-    std::string set = "right";
+    std::string set(env::kRouteSets.front());
     const fs::path path = run / "config.yaml";
     if (fs::exists(path)) {
       try {
@@ -533,9 +533,7 @@ std::string route_set_of(const std::vector<fs::path>& runs) {
         // Not readable YAML: the page still shows it as text below; the default set.
       }
     }
-    if (std::find(env::kRouteSets.begin(), env::kRouteSets.end(), set) == env::kRouteSets.end()) {
-      return "";
-    }
+    if (!env::is_route_set(set)) return "";
     sets.insert(set);
   }
   return sets.size() == 1 ? *sets.begin() : "";

@@ -181,8 +181,7 @@ double average_over_routes(const Table& table, const std::string& method, const 
 }
 
 TownChoices route_choices_of(const Report& report, const std::string& route_set) {
-  if (std::find(env::kRouteSets.begin(), env::kRouteSets.end(), route_set) ==
-      env::kRouteSets.end()) {
+  if (!env::is_route_set(route_set)) {
     throw std::invalid_argument("unknown route set '" + route_set +
                                 "': give the env.route_set the evaluations ran with, right "
                                 "(the default) or left");

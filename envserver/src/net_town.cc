@@ -264,7 +264,7 @@ Town load_town(const std::string& spec, const TownOptions& options) {
   std::vector<RouteSpec> specs;
   const auto towns = builtin_towns();
   if (std::find(towns.begin(), towns.end(), spec) != towns.end()) {
-    if (std::find(kRouteSets.begin(), kRouteSets.end(), options.route_set) == kRouteSets.end()) {
+    if (!is_route_set(options.route_set)) {
       throw MapError("unknown route set '" + options.route_set + "'; give right or left");
     }
     fs::path folder = data_dir(options) / "routes";

@@ -15,6 +15,7 @@
 //   draw_town(town.net, town.routes, town.spawns, "town01.png");
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <filesystem>
 #include <string>
@@ -46,6 +47,10 @@ struct TownOptions {
 
 // The route sets of the built-in towns, the default first.
 inline constexpr std::array<std::string_view, 2> kRouteSets = {"right", "left"};
+// Whether `name` is one of kRouteSets.
+inline bool is_route_set(std::string_view name) {
+  return std::find(kRouteSets.begin(), kRouteSets.end(), name) != kRouteSets.end();
+}
 
 // The built-in town names.
 std::vector<std::string> builtin_towns();
