@@ -13,6 +13,7 @@
 #include "indrive/actor/policies.h"
 #include "indrive/actor/protocol_episode.h"
 #include "indrive/actor/protocol_record.h"
+#include "indrive/actor/rejoin.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/basics/check.h"
@@ -141,7 +142,8 @@ struct Evaluator::Impl {
       inbox = std::make_unique<SnapshotInbox>(service.run_id(),
                                               service::architecture_descriptor(agent_config),
                                               c.get<double>("actor.request_after_s"));
-      rejoin_after_s = c.get<double>("actor.rejoin_after_s");
+      rejoin = RejoinSchedule(c.get<double>("actor.rejoin_after_s"),
+                              c.get<double>("actor.rejoin_max_s"));
       connect();
     }
     env::EnvConfig env_config = protocol_env_config(actor::env_config(service, agent_config));
@@ -179,17 +181,23 @@ struct Evaluator::Impl {
   // stall for good (an evaluator joining late on another host waited 120 s for its first
   // snapshot while every other participant had authenticated it); the new participant's
   // handshake starts afresh. Nothing is lost: a participant that never heard the learner holds
-  // nothing for it.
+  // nothing for it. Each replacement that hears nothing either doubles the wait for the next,
+  // up to actor.rejoin_max_s (rejoin.h).
   void maybe_rejoin() {
-    if (rejoin_after_s <= 0.0) return;
+    if (!rejoin.enabled()) return;
     const Clock::time_point beat{Clock::duration(last_learner_beat.load())};
-    if (beat >= connected_at) return;  // heard with this participant
-    if (std::chrono::duration<double>(Clock::now() - connected_at).count() < rejoin_after_s) return;
+    if (beat >= connected_at) {  // heard with this participant
+      rejoin.heard();
+      return;
+    }
+    const double wait_s = rejoin.wait_s();
+    if (std::chrono::duration<double>(Clock::now() - connected_at).count() < wait_s) return;
     ++rejoins;
+    rejoin.replaced();
     INDRIVE_LOG(kWarn, "evaluator")
         << "evaluator " << index << " heard nothing of the learner of run '" << config.run_id()
-        << "' for " << rejoin_after_s << " s; recreating its DDS participant (rejoin " << rejoins
-        << ")";
+        << "' for " << wait_s << " s; recreating its DDS participant (rejoin " << rejoins
+        << "; the next after " << rejoin.wait_s() << " s of silence)";
     result_writer = nullptr;
     request_writer = nullptr;
     endpoints.reset();
@@ -428,7 +436,7 @@ struct Evaluator::Impl {
   // When the learner's last heartbeat arrived (steady clock ticks; 0: never).
   std::atomic<Clock::rep> last_learner_beat{0};
   Clock::time_point connected_at{};
-  double rejoin_after_s = 20.0;
+  RejoinSchedule rejoin{20.0, 160.0};
   std::uint64_t rejoins = 0;  // participants replaced (maybe_rejoin)
   // The DDS endpoints when a learner's snapshot is evaluated; the writers belong to it.
   std::unique_ptr<dds::EndpointSet> endpoints;

@@ -7,6 +7,7 @@
 
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/rejoin.h"
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/agent/policy.h"
 #include "indrive/basics/check.h"
@@ -114,7 +115,8 @@ struct TrainingActor::Impl {
                       actor_id),
         rng(static_cast<std::uint64_t>(service.config().get<std::int64_t>("run.seed")) * 7919u +
             actor_id + 1),
-        rejoin_after_s(service.config().get<double>("actor.rejoin_after_s")) {
+        rejoin(service.config().get<double>("actor.rejoin_after_s"),
+               service.config().get<double>("actor.rejoin_max_s")) {
     // DDS first: a learner can see this actor while SUMO is still loading.
     connect();
     heartbeat("starting");
@@ -172,17 +174,22 @@ struct TrainingActor::Impl {
   // once heard, silence means a cut link across hosts, where replacing it hurts: the chunks the old
   // participant still held for the learner were lost (tests/learner/two_host_test.cc); a
   // participant that never heard the learner holds none (no allowance, no chunk).
+  // Each replacement that hears nothing either doubles the wait for the next, up to
+  // actor.rejoin_max_s (rejoin.h).
   void maybe_rejoin() {
-    if (rejoin_after_s <= 0.0) return;
+    if (!rejoin.enabled()) return;
     const double silent_s = gate.silent_s(), connected_s = seconds_since(connected_at);
-    if (silent_s < rejoin_after_s || connected_s < rejoin_after_s) return;
     const bool never_heard = silent_s >= connected_s;  // nothing since this participant was made
+    if (!never_heard) rejoin.heard();
+    const double wait_s = rejoin.wait_s();
+    if (silent_s < wait_s || connected_s < wait_s) return;
     if (!endpoints->participant().uses_shared_memory() && !never_heard) return;
     ++stats.rejoins;
+    if (never_heard) rejoin.replaced();
     INDRIVE_LOG(kWarn, "actor") << "actor " << id << " heard nothing of the learner of run '"
-                                << config.run_id() << "' for " << rejoin_after_s
+                                << config.run_id() << "' for " << wait_s
                                 << " s; recreating its DDS participant (rejoin " << stats.rejoins
-                                << ")";
+                                << "; the next after " << rejoin.wait_s() << " s of silence)";
     disconnect();
     connect();
     heartbeat("waiting");
@@ -433,7 +440,7 @@ struct TrainingActor::Impl {
   bool restart_state = false;
   std::atomic<std::uint64_t> own_steps{0};
   Clock::time_point last_heartbeat{};
-  double rejoin_after_s = 20.0;
+  RejoinSchedule rejoin;
   Clock::time_point connected_at{};
   ActorStats stats;
 };

@@ -745,18 +745,27 @@ TEST_F(FaultTest, AnActorThatHearsNoLearnerReplacesItsParticipantAndJoinsALateLe
 }
 
 // An evaluator that has heard nothing of its learner replaces its participant the same way
-// (over UDP, where a stalled DDS Security handshake of a late evaluator was seen), and the
-// replaced participant still gets the learner's snapshot once it comes.
+// (over UDP, where a stalled DDS Security handshake of a late evaluator was seen), waiting
+// twice as long after each replacement up to actor.rejoin_max_s, and the replaced participant
+// still gets the learner's snapshot once it comes.
 TEST_F(FaultTest, AnEvaluatorThatNeverHeardItsLearnerReplacesItsParticipantAndGetsASnapshot) {
   profile_ = testing::source_path("deploy/dds/default.xml");
   const fs::path log = dir_.path() / "evaluator.log";
-  auto argv = args("indrive-actor", {"actor.rejoin_after_s=2", "eval.wait_for_done=false",
-                                     "eval.towns=town01", "eval.snapshot_timeout_s=120"});
+  auto argv = args("indrive-actor",
+                   {"actor.rejoin_after_s=2", "actor.rejoin_max_s=4", "eval.wait_for_done=false",
+                    "eval.towns=town01", "eval.snapshot_timeout_s=120"});
   argv.insert(argv.end(), {"--evaluate", "--id", "0"});
   Child evaluator(argv, log);
   const auto rejoins = [&] { return participant_replacements(log); };
   ASSERT_TRUE(wait_until(60s, [&] { return rejoins() >= 2; })) << logs();
   ASSERT_TRUE(evaluator.running()) << logs();
+  const std::string waited = testing::slurp(log);
+  EXPECT_NE(waited.find("for 2 s; recreating its DDS participant (rejoin 1; the next after 4 s"),
+            std::string::npos)
+      << waited;
+  EXPECT_NE(waited.find("for 4 s; recreating its DDS participant (rejoin 2; the next after 4 s"),
+            std::string::npos)
+      << waited;
 
   auto learner = start_learner();
   auto actor0 = start_actor(0);

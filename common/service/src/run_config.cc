@@ -98,6 +98,11 @@ void declare_service_schema(config::Schema& schema) {
                  "waiting actor or evaluator replaces its DDS participant; over UDP and for "
                  "evaluators only one that never heard the learner (0: never)",
                  0.0)
+      .add_float("actor.rejoin_max_s", 160.0,
+                 "longest wait between two such replacements: the wait doubles from "
+                 "actor.rejoin_after_s for each replacement that heard nothing, and is "
+                 "actor.rejoin_after_s again once the learner is heard",
+                 0.0)
       .add_float("actor.coverage_period_s", 60.0,
                  "seconds between writes of the actor's coverage/actor-<id>.csv", 1.0);
   schema.add_bool("local.random", false,
