@@ -182,9 +182,13 @@ double average_over_routes(const Table& table, const std::string& method, const 
 
 TownChoices route_choices_of(const Report& report, const std::string& route_set) {
   if (!env::is_route_set(route_set)) {
+    std::string sets;
+    for (std::string_view name : env::kRouteSets) {
+      sets += sets.empty() ? std::string(name) + " (the default)" : ", " + std::string(name);
+    }
     throw std::invalid_argument("unknown route set '" + route_set +
-                                "': give the env.route_set the evaluations ran with, right "
-                                "(the default) or left");
+                                "': give the env.route_set the evaluations ran with, one of " +
+                                sets);
   }
   // Loaded once per (route set, town) and process (a live dashboard asks on every refresh); a
   // town that does not load is remembered as such.

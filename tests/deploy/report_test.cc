@@ -161,7 +161,14 @@ TEST(Report, TheLayoutBoundIsTakenFromTheRouteSetTheEvaluationsRanWith) {
     const std::string md = render_markdown(report, "town01", "town02", choices, set);
     EXPECT_NE(md.find("route set `" + set + "`"), std::string::npos) << md;
   }
-  EXPECT_THROW(route_choices_of(report, "middle"), std::invalid_argument);
+  try {
+    route_choices_of(report, "middle");
+    ADD_FAILURE() << "an unknown route set was accepted";
+  } catch (const std::invalid_argument& e) {
+    // The message names every set the towns have, so the user knows what to give.
+    EXPECT_NE(std::string(e.what()).find("one of right (the default), left"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(Report, FailureColumnsFollowTheEventOrderOffRouteIncluded) {
