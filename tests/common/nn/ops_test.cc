@@ -327,6 +327,26 @@ TEST_F(OpsTest, SoftmaxGradientsAndValues) {
   EXPECT_NEAR(big.data()[1], -1000.0f, 1e-3f);
 }
 
+// The backward rules of softmax and log-softmax at the widths with their own fixed-size kernel
+// (16, 32) and another, both when the input's gradient is written fresh and when it adds to a
+// gradient that another use of the input already left there.
+TEST_F(OpsTest, SoftmaxGradientsAtEveryWidthFreshAndAccumulated) {
+  for (int cols : {9, 16, 32}) {
+    std::string name = "x";
+    name += std::to_string(cols);
+    Parameter& x = input(name, {4, cols}, -3.0f, 3.0f);
+    EXPECT_EQ(check("softmax", [&] { return softmax(x.tensor()); }), 0) << "width " << cols;
+    EXPECT_EQ(check("log_softmax", [&] { return log_softmax(x.tensor()); }), 0) << "width " << cols;
+    EXPECT_EQ(
+        check("softmax + x", [&] { return add(softmax(x.tensor()), scale(x.tensor(), 0.5f)); }), 0)
+        << "width " << cols;
+    EXPECT_EQ(check("log_softmax + x",
+                    [&] { return add(log_softmax(x.tensor()), scale(x.tensor(), 0.5f)); }),
+              0)
+        << "width " << cols;
+  }
+}
+
 // The widths with their own fixed-size kernel (16, 32) and others against the formula.
 TEST_F(OpsTest, SoftmaxEveryWidthMatchesTheFormula) {
   for (int cols : {9, 16, 32, 255}) {
