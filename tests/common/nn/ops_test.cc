@@ -255,6 +255,31 @@ TEST_F(OpsTest, LayerNormEveryWidthMatchesTheFormula) {
   }
 }
 
+// The backward rule at the widths with their own fixed-size kernel (8, 16, 32) and others, with
+// and without scale and offset, with SiLU, and adding to a gradient another use of x left.
+TEST_F(OpsTest, LayerNormGradientsAtEveryWidth) {
+  for (int cols : {5, 8, 16, 32, 40}) {
+    const std::string w = std::to_string(cols);
+    Parameter& x = input("x" + w, {3, cols}, -2.0f, 2.0f);
+    Parameter& g = input("g" + w, {cols}, 0.5f, 1.5f);
+    Parameter& b = input("b" + w, {cols});
+    EXPECT_EQ(check("layer_norm " + w,
+                    [&] { return layer_norm(x.tensor(), g.tensor(), b.tensor(), 1e-3f); }),
+              0);
+    EXPECT_EQ(check("layer_norm plain " + w, [&] { return layer_norm(x.tensor(), {}, {}, 1e-3f); }),
+              0);
+    EXPECT_EQ(check("layer_norm_silu " + w,
+                    [&] { return layer_norm_silu(x.tensor(), g.tensor(), b.tensor(), 1e-3f); }),
+              0);
+    EXPECT_EQ(check("layer_norm_silu + x " + w,
+                    [&] {
+                      return add(layer_norm_silu(x.tensor(), g.tensor(), b.tensor(), 1e-3f),
+                                 scale(x.tensor(), 0.5f));
+                    }),
+              0);
+  }
+}
+
 TEST_F(OpsTest, LayerNormLargeInputsSplitIntoChunksMatchRowByRow) {
   // Enough rows for the chunked (and possibly parallel) path; compare against small calls.
   Parameter& x = input("x", {3000, 24}, -2.0f, 2.0f);
