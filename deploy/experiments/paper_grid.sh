@@ -32,7 +32,11 @@
 # zeroshot fewshot" (a chain's stages), --task T (dreamer's task; a chain's fewshot then does
 # only T), --fewshot-ratio N (512), --route-set right|left (env.route_set of every run and
 # evaluation: the built-in towns' route set, right by default), --set KEY=VALUE for every
-# training run (repeatable), --page DIR and --snapshot-seeds "S ..." (publish).
+# training run (repeatable), --page DIR and --snapshot-seeds "S ..." (publish), --trained-in
+# DIR: take every training run (pretrain, few-shot, dreamer) from another --out instead of
+# training, linked into this one, to evaluate the same policies on another --route-set:
+#   paper_grid.sh chain --out runs/grid-left --trained-in runs/grid --route-set left \
+#       --seed 0 --method disag --stages "zeroshot fewshot"
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -52,8 +56,9 @@ route_set=right
 extra=()
 page=""
 snapshot_seeds=0
+trained_in=""
 
-usage() { sed -n '2,35p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,39p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -75,6 +80,7 @@ while [[ $# -gt 0 ]]; do
     --set) extra+=(--set "$2"); shift 2 ;;
     --page) page=$2; shift 2 ;;
     --snapshot-seeds) snapshot_seeds=$2; shift 2 ;;
+    --trained-in) trained_in=$2; shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -108,11 +114,22 @@ config_of() { # phase task -> config file
 }
 done_mark() { [[ -f $1/DONE ]]; }
 
-# Trains one run to its budget (resuming when stopped) and checks its snapshot file.
+# Trains one run to its budget (resuming when stopped) and checks its snapshot file; with
+# --trained-in, links the finished run of the same name there instead.
+link_trained() { # run_dir: with --trained-in, links the finished run of the same name there
+  [[ -n $trained_in && ! -e $1 ]] || return 0
+  local from
+  from="$(cd "$trained_in" 2> /dev/null && pwd)/s$seed/$(basename "$1")"
+  done_mark "$from" || { echo "--trained-in: $from is not a finished run; train it there first (the same chain without --trained-in, --out $trained_in)" >&2; exit 1; }
+  ln -s "$from" "$1"
+  say "$1: linked to the run trained in $from"
+}
 train() { # run_dir config steps [--set ...]
   local dir=$1 config=$2 steps=$3
   shift 3
+  link_trained "$dir"
   if done_mark "$dir"; then say "$dir done already"; return; fi
+  [[ -z $trained_in ]] || { echo "--trained-in: $dir exists but is not a finished run; remove it and run again" >&2; exit 1; }
   mkdir -p "$dir"
   "$bin/indrive-train-local" --config "$config" --run-dir "$dir" "${common[@]}" \
     --set "run.budget_env_steps=$steps" "$@" --log-level warn 2>&1 | tee -a "$dir/train.log" |
@@ -155,6 +172,8 @@ case $command in
       has_stage zeroshot && { say "zero-shot random policy, seed $seed"; evaluate "$seed_dir/zeroshot-random" zero_shot random; }
       exit 0
     fi
+    # Evaluating another route set's routes: the pretraining every later stage starts from.
+    if has_stage zeroshot || has_stage fewshot; then link_trained "$pre"; fi
     has_stage pretrain && { say "pretrain $method seed $seed, $pretrain_steps env steps ($preset)"; train "$pre" "$(config_of pretrain "$method")" "$pretrain_steps"; }
     has_stage zeroshot && { say "zero-shot $method seed $seed"; evaluate "$seed_dir/zeroshot-$method" zero_shot "$pre/snapshot.params" --set "agent.intrinsic.method=$method"; }
     if has_stage fewshot; then

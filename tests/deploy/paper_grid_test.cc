@@ -124,5 +124,38 @@ TEST(PaperGridPublish, MachinePathsAreRemovedLiterally) {
             "run:\n  dir: runs/g/s1/pretrain-rnd\n  other: /elsewhere/repo #1 & coAx/kept\n");
 }
 
+// chain --trained-in: the training runs of another --out are linked, not trained again (to
+// evaluate the same policies on another route set), and a run missing there is an error that
+// says where to train it, before anything is trained here.
+TEST(PaperGridChain, TrainedInLinksTheOtherGridsFinishedRunsInsteadOfTraining) {
+  testing::TempDir dir;
+  const fs::path trained = dir.path() / "grid", out = dir.path() / "grid-left";
+  write_text(trained / "s0/pretrain-disag/DONE", "");
+  write_text(trained / "s0/pretrain-disag/snapshot.params", "weights");
+  const auto chain = [&](const std::string& method, const fs::path& log) {
+    testing::Child run(
+        {"/bin/bash", (kSource / "deploy/experiments/paper_grid.sh").string(), "chain", "--out",
+         out.string(), "--trained-in", trained.string(), "--route-set", "left", "--seed", "0",
+         "--method", method, "--stages", "pretrain", "--bin", kBin.string()},
+        log);
+    return run.wait(60s);
+  };
+  const fs::path linked_log = dir.path() / "linked.log";
+  ASSERT_EQ(chain("disag", linked_log), 0) << testing::slurp(linked_log);
+  const fs::path linked = out / "s0/pretrain-disag";
+  ASSERT_TRUE(fs::is_symlink(linked)) << testing::slurp(linked_log);
+  EXPECT_EQ(fs::canonical(linked), fs::canonical(trained / "s0/pretrain-disag"));
+  EXPECT_EQ(testing::slurp(linked / "snapshot.params"), "weights");
+  EXPECT_FALSE(fs::exists(trained / "s0/pretrain-disag/train.log")) << "nothing was trained";
+
+  const fs::path missing_log = dir.path() / "missing.log";
+  EXPECT_NE(chain("icm", missing_log), 0);
+  const std::string said = testing::slurp(missing_log);
+  EXPECT_NE(said.find("pretrain-icm is not a finished run; train it there first"),
+            std::string::npos)
+      << said;
+  EXPECT_FALSE(fs::exists(out / "s0/pretrain-icm"));
+}
+
 }  // namespace
 }  // namespace indrive
