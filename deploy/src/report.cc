@@ -142,6 +142,7 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
               stats.successes += count.successes;
             }
             seed_means.push_back(sum / static_cast<double>(densities.size()));
+            stats.seed_sr[seed] = seed_means.back();
             rc += completion / static_cast<double>(densities.size());
           }
           stats.rc = rc / static_cast<double>(seeds.size());
@@ -178,6 +179,83 @@ double average_over_routes(const Table& table, const std::string& method, const 
   double sum = 0.0;
   for (const auto& [route, stats] : t->second) sum += stats.sr;
   return sum / static_cast<double>(t->second.size());
+}
+
+namespace {
+
+// Mean and 95% t-interval of per-seed values (the interval needs 2 or more).
+SeedInterval seed_interval(const std::map<int, double>& values) {
+  SeedInterval out;
+  out.seeds = static_cast<int>(values.size());
+  for (const auto& [seed, v] : values) out.mean += v;
+  out.mean /= static_cast<double>(values.size());
+  if (values.size() < 2) {
+    out.ci_low = out.ci_high = std::numeric_limits<double>::quiet_NaN();
+    return out;
+  }
+  double variance = 0.0;
+  for (const auto& [seed, v] : values) variance += (v - out.mean) * (v - out.mean);
+  variance /= static_cast<double>(values.size() - 1);
+  const double half =
+      t_quantile_975(out.seeds - 1) * std::sqrt(variance / static_cast<double>(values.size()));
+  out.ci_low = out.mean - half;
+  out.ci_high = out.mean + half;
+  return out;
+}
+
+// Each seed's mean SR over the routes of one town; nullopt when the town has no cells or its
+// cells were not evaluated with the same seeds.
+std::optional<std::map<int, double>> route_means_by_seed(const Table& table,
+                                                         const std::string& method,
+                                                         const std::string& town) {
+  const auto m = table.cells.find(method);
+  if (m == table.cells.end()) return std::nullopt;
+  const auto t = m->second.find(town);
+  if (t == m->second.end() || t->second.empty()) return std::nullopt;
+  std::map<int, double> sums;
+  for (const auto& [seed, sr] : t->second.begin()->second.seed_sr) sums[seed] = 0.0;
+  for (const auto& [route, stats] : t->second) {
+    if (stats.seed_sr.size() != sums.size()) return std::nullopt;
+    for (const auto& [seed, sr] : stats.seed_sr) {
+      const auto it = sums.find(seed);
+      if (it == sums.end()) return std::nullopt;
+      it->second += sr;
+    }
+  }
+  for (auto& [seed, sum] : sums) sum /= static_cast<double>(t->second.size());
+  return sums;
+}
+
+}  // namespace
+
+std::optional<SeedInterval> average_over_routes_by_seed(const Table& table,
+                                                        const std::string& method,
+                                                        const std::string& town) {
+  const auto means = route_means_by_seed(table, method, town);
+  if (!means || means->empty()) return std::nullopt;
+  SeedInterval out = seed_interval(*means);
+  // An SR lies in [0, 100], like the cells' intervals.
+  if (out.seeds >= 2)
+    out.ci_low = std::max(0.0, out.ci_low), out.ci_high = std::min(100.0, out.ci_high);
+  return out;
+}
+
+std::optional<SeedInterval> gap_by_seed(const Table& table, const std::string& method,
+                                        const std::string& seen, const std::string& heldout) {
+  const auto a = route_means_by_seed(table, method, seen);
+  const auto b = route_means_by_seed(table, method, heldout);
+  if (!a || !b || a->empty()) return std::nullopt;
+  std::map<int, double> gaps;
+  for (const auto& [seed, v] : *a) {
+    const auto it = b->find(seed);
+    if (it == b->end()) return std::nullopt;
+    gaps[seed] = v - it->second;
+  }
+  if (gaps.size() != b->size()) return std::nullopt;
+  SeedInterval out = seed_interval(gaps);
+  if (out.seeds >= 2)
+    out.ci_low = std::max(-100.0, out.ci_low), out.ci_high = std::min(100.0, out.ci_high);
+  return out;
 }
 
 TownChoices route_choices_of(const Report& report, const std::string& route_set) {
@@ -229,7 +307,8 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
      << "successful episodes, FR = 100 - SR. Each cell: SR averaged uniformly over the "
      << "densities evaluated, then over training seeds; [95% CI] is a t-interval over seeds "
      << "when there are 2 or more, otherwise a Wilson interval on the pooled episodes; n = "
-     << "episodes behind the cell.\n";
+     << "episodes behind the cell. Averages over routes and gaps: with 2 or more seeds, [95% CI] "
+     << "is a t-interval over the seeds' own averages (gaps), none with one seed.\n";
   for (const auto& [key, table] : report.tables) {
     md << "\n## " << title_of(key) << "\n";
     for (const auto& town : table.towns) {
@@ -262,14 +341,28 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
     md << "\n|---|";
     for (std::size_t i = 0; i < table.towns.size() + (has_gap ? 1 : 0); ++i) md << "---|";
     md << "\n";
+    // With 2 or more seeds a cell also carries the t-interval over the seeds' own averages
+    // (and gaps), which is what tells two methods apart; one seed's has none.
+    const auto with_interval = [](double value, const std::optional<SeedInterval>& by_seed) {
+      std::string text = fixed(value);
+      if (by_seed && by_seed->seeds >= 2) {
+        text += " [" + fixed(by_seed->ci_low) + ", " + fixed(by_seed->ci_high) + "]";
+      }
+      return text;
+    };
     for (const auto& method : table.methods) {
       md << "| " << method << " |";
-      for (const auto& town : table.towns)
-        md << " " << fixed(average_over_routes(table, method, town)) << " |";
+      for (const auto& town : table.towns) {
+        md << " "
+           << with_interval(average_over_routes(table, method, town),
+                            average_over_routes_by_seed(table, method, town))
+           << " |";
+      }
       if (has_gap) {
         md << " "
-           << fixed(average_over_routes(table, method, seen_town) -
-                    average_over_routes(table, method, heldout_town))
+           << with_interval(average_over_routes(table, method, seen_town) -
+                                average_over_routes(table, method, heldout_town),
+                            gap_by_seed(table, method, seen_town, heldout_town))
            << " |";
       }
       md << "\n";

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 
 #include "testing.h"
@@ -59,6 +60,50 @@ TEST(Report, WilsonIntervalMatchesTheFormula) {
   const auto [zero_low, zero_high] = wilson_interval(0, 50);
   EXPECT_DOUBLE_EQ(zero_low, 0.0);
   EXPECT_NEAR(zero_high, 7.13, 0.05);
+}
+
+// With several seeds the average over routes and the gap carry a t-interval over the seeds' own
+// averages (each seed: mean of its route cells); one seed's carry none.
+TEST(Report, AveragesAndGapsCarryATIntervalOverSeeds) {
+  std::vector<EpisodeRecord> records;
+  // Per seed, SR of (town01 straight, two_turn; town02 straight, two_turn), 4 episodes each.
+  const int successes[3][4] = {{4, 2, 2, 0}, {3, 2, 2, 2}, {2, 2, 3, 1}};
+  for (int seed = 0; seed < 3; ++seed) {
+    add_episodes(records, "disag", seed, "town01", "straight", 10, 4, successes[seed][0]);
+    add_episodes(records, "disag", seed, "town01", "two_turn", 10, 4, successes[seed][1]);
+    add_episodes(records, "disag", seed, "town02", "straight", 10, 4, successes[seed][2]);
+    add_episodes(records, "disag", seed, "town02", "two_turn", 10, 4, successes[seed][3]);
+  }
+  add_episodes(records, "icm", 0, "town01", "straight", 10, 4, 1);
+  add_episodes(records, "icm", 0, "town01", "two_turn", 10, 4, 1);
+  add_episodes(records, "icm", 0, "town02", "straight", 10, 4, 0);
+  add_episodes(records, "icm", 0, "town02", "two_turn", 10, 4, 0);
+  const Report report = aggregate(records);
+  const Table& table = report.tables.at({"zero_shot", "exploration"});
+  // town01 averages per seed 75, 62.5, 50: mean 62.5, sd 12.5, half 4.303 * 12.5 / sqrt(3).
+  const auto town01 = average_over_routes_by_seed(table, "disag", "town01");
+  ASSERT_TRUE(town01.has_value());
+  EXPECT_EQ(town01->seeds, 3);
+  EXPECT_DOUBLE_EQ(town01->mean, 62.5);
+  const double half = 4.303 * 12.5 / std::sqrt(3.0);
+  EXPECT_NEAR(town01->ci_low, 62.5 - half, 1e-9);
+  EXPECT_NEAR(town01->ci_high, 62.5 + half, 1e-9);
+  // Gaps per seed 50, 12.5, 0.
+  const auto gap = gap_by_seed(table, "disag", "town01", "town02");
+  ASSERT_TRUE(gap.has_value());
+  EXPECT_NEAR(gap->mean, 62.5 / 3.0, 1e-9);
+  const std::string md = render_markdown(report, "town01", "town02");
+  EXPECT_NE(md.find("| disag | 62.5 [31.4, 93.6] | 41.7 [5.8, 77.5] | 20.8 [-43.8, 85.5] |"),
+            std::string::npos)
+      << md;
+  EXPECT_NE(md.find("| icm | 25.0 | 0.0 | 25.0 |"), std::string::npos) << md;
+  // Routes evaluated with different seeds have no per-seed average.
+  add_episodes(records, "rnd", 0, "town01", "straight", 10, 4, 1);
+  add_episodes(records, "rnd", 1, "town01", "two_turn", 10, 4, 1);
+  const Report mixed = aggregate(records);
+  EXPECT_FALSE(
+      average_over_routes_by_seed(mixed.tables.at({"zero_shot", "exploration"}), "rnd", "town01")
+          .has_value());
 }
 
 TEST(Report, RoutesInPaperOrderAveragesAndTheGeneralisationGap) {

@@ -14,6 +14,7 @@
 
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -33,6 +34,8 @@ struct CellStats {
   // Mean route completion (share of the route driven, the destination or a full lap = 100),
   // averaged like sr: over episodes of a density, over densities, over seeds.
   double rc = 0.0;
+  // Each training seed's SR of the cell (mean over its densities), by seed.
+  std::map<int, double> seed_sr;
   double fr() const { return 100.0 - sr; }
 };
 
@@ -65,6 +68,26 @@ Report aggregate(const std::vector<EpisodeRecord>& records);
 
 // Mean SR over the routes of one town for one method; NaN if that town has no cells.
 double average_over_routes(const Table& table, const std::string& method, const std::string& town);
+
+// A mean over training seeds with its 95% t-interval over the seeds' own values (seeds < 2:
+// no interval, ci_low = ci_high = NaN).
+struct SeedInterval {
+  double mean = 0.0;
+  double ci_low = 0.0;
+  double ci_high = 0.0;
+  int seeds = 0;
+};
+
+// The average SR over routes of one town, as a value per training seed (that seed's mean over
+// the routes) and their mean with its t-interval; nullopt when the town has no cells or its
+// routes were not evaluated with the same seeds (then no per-seed average exists).
+std::optional<SeedInterval> average_over_routes_by_seed(const Table& table,
+                                                        const std::string& method,
+                                                        const std::string& town);
+
+// The same for the gap: per seed, its average over `seen`'s routes minus over `heldout`'s.
+std::optional<SeedInterval> gap_by_seed(const Table& table, const std::string& method,
+                                        const std::string& seen, const std::string& heldout);
 
 // The route choices of the towns a report covers (route_choices() of each town's routes), for
 // the layout bound row: the most a policy that sees no route and picks its exit by a
