@@ -26,7 +26,9 @@
 #   deploy/experiments/paper_grid.sh report
 #   deploy/experiments/paper_grid.sh publish --page docs/results/method-fewshot512
 # Two chains side by side on 2 cores: give each OMP_NUM_THREADS=1 (the script sets it and
-# OMP_WAIT_POLICY=passive unless they are set).
+# OMP_WAIT_POLICY=passive unless they are set), and start them from one session (one shell,
+# `&`): with the kernel's autogroup scheduling each session gets an equal CPU share, so a chain
+# started alone under setsid ran at 0.9 core beside three that shared the other.
 # Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
 # --task-steps N (10000), --episodes N per town x route x density (5), --stages "pretrain
 # zeroshot fewshot" (a chain's stages), --task T (dreamer's task; a chain's fewshot then does
@@ -58,7 +60,7 @@ page=""
 snapshot_seeds=0
 trained_in=""
 
-usage() { sed -n '2,39p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,41p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
