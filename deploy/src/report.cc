@@ -34,6 +34,26 @@ double t_quantile_975(int dof) {
   return dof <= 30 ? table[dof] : 1.96;
 }
 
+// Mean and 95% t-interval of per-seed values (the interval needs 2 or more).
+SeedInterval seed_interval(const std::map<int, double>& values) {
+  SeedInterval out;
+  out.seeds = static_cast<int>(values.size());
+  for (const auto& [seed, v] : values) out.mean += v;
+  out.mean /= static_cast<double>(values.size());
+  if (values.size() < 2) {
+    out.ci_low = out.ci_high = std::numeric_limits<double>::quiet_NaN();
+    return out;
+  }
+  double variance = 0.0;
+  for (const auto& [seed, v] : values) variance += (v - out.mean) * (v - out.mean);
+  variance /= static_cast<double>(values.size() - 1);
+  const double half =
+      t_quantile_975(out.seeds - 1) * std::sqrt(variance / static_cast<double>(values.size()));
+  out.ci_low = out.mean - half;
+  out.ci_high = out.mean + half;
+  return out;
+}
+
 std::string fixed(double value, int digits = 1) {
   if (std::isnan(value)) return "-";
   std::ostringstream out;
@@ -131,7 +151,6 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
       for (const auto& [town, routes] : towns) {
         for (const auto& [route, seeds] : routes) {
           CellStats stats;
-          std::vector<double> seed_means;
           double rc = 0.0;
           for (const auto& [seed, densities] : seeds) {
             double sum = 0.0, completion = 0.0;
@@ -141,24 +160,16 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
               stats.episodes += count.episodes;
               stats.successes += count.successes;
             }
-            seed_means.push_back(sum / static_cast<double>(densities.size()));
-            stats.seed_sr[seed] = seed_means.back();
+            stats.seed_sr[seed] = sum / static_cast<double>(densities.size());
             rc += completion / static_cast<double>(densities.size());
           }
           stats.rc = rc / static_cast<double>(seeds.size());
-          stats.seeds = static_cast<int>(seed_means.size());
-          double mean = 0.0;
-          for (const double m : seed_means) mean += m;
-          mean /= static_cast<double>(seed_means.size());
-          stats.sr = mean;
-          if (seed_means.size() >= 2) {
-            double variance = 0.0;
-            for (const double m : seed_means) variance += (m - mean) * (m - mean);
-            variance /= static_cast<double>(seed_means.size() - 1);
-            const double half = t_quantile_975(static_cast<int>(seed_means.size()) - 1) *
-                                std::sqrt(variance / static_cast<double>(seed_means.size()));
-            stats.ci_low = std::max(0.0, mean - half);
-            stats.ci_high = std::min(100.0, mean + half);
+          const SeedInterval over_seeds = seed_interval(stats.seed_sr);
+          stats.seeds = over_seeds.seeds;
+          stats.sr = over_seeds.mean;
+          if (over_seeds.seeds >= 2) {
+            stats.ci_low = std::max(0.0, over_seeds.ci_low);
+            stats.ci_high = std::min(100.0, over_seeds.ci_high);
           } else {
             std::tie(stats.ci_low, stats.ci_high) =
                 wilson_interval(stats.successes, stats.episodes);
@@ -182,26 +193,6 @@ double average_over_routes(const Table& table, const std::string& method, const 
 }
 
 namespace {
-
-// Mean and 95% t-interval of per-seed values (the interval needs 2 or more).
-SeedInterval seed_interval(const std::map<int, double>& values) {
-  SeedInterval out;
-  out.seeds = static_cast<int>(values.size());
-  for (const auto& [seed, v] : values) out.mean += v;
-  out.mean /= static_cast<double>(values.size());
-  if (values.size() < 2) {
-    out.ci_low = out.ci_high = std::numeric_limits<double>::quiet_NaN();
-    return out;
-  }
-  double variance = 0.0;
-  for (const auto& [seed, v] : values) variance += (v - out.mean) * (v - out.mean);
-  variance /= static_cast<double>(values.size() - 1);
-  const double half =
-      t_quantile_975(out.seeds - 1) * std::sqrt(variance / static_cast<double>(values.size()));
-  out.ci_low = out.mean - half;
-  out.ci_high = out.mean + half;
-  return out;
-}
 
 // Each seed's mean SR over the routes of one town; nullopt when the town has no cells or its
 // cells were not evaluated with the same seeds.
