@@ -79,55 +79,60 @@ Tensor LatentDisagreement::loss(const Transitions& batch) {
 std::vector<float> LatentDisagreement::reward(Tensor feat, Tensor action, Tensor next_feat) {
   (void)next_feat;
   nn::NoGradGuard no_grad;
-  nn::Graph& graph = nn::current_graph();
   const std::int64_t n = feat.dim(0);
-  // Rows are scored in chunks whose activations are given back to the arena after each chunk:
-  // the K members' hidden layers and softmaxes over all H * N imagined states would otherwise
-  // take over a gigabyte that is written once and read once.
-  constexpr std::int64_t kChunkRows = 1024;
   std::vector<float> out(n);
-  std::vector<float> mean, var;
-  const float inv_k = 1.0f / static_cast<float>(members());
-  std::vector<Tensor> preds(members());
-  const Tensor stacked = stacked_first_weights();  // before the mark: kept for every chunk
-  for (std::int64_t r0 = 0; r0 < n; r0 += kChunkRows) {
-    const std::int64_t r1 = std::min(n, r0 + kChunkRows);
+  const Tensor stacked = stacked_first_weights();  // in the caller's graph, read by every chunk
+  // Rows are scored in chunks of a fixed size, each on one thread and its own graph, whose
+  // activations are given back after the chunk: the K members' hidden layers and softmaxes over
+  // all H * N imagined states would otherwise take over a gigabyte that is written once and
+  // read once. Whole chunks in parallel use every thread through the members' many small ops,
+  // which split op by op would mostly run on one; and the fixed size keeps the rewards the same
+  // for any thread count.
+  const std::int64_t chunks = (n + kRewardChunkRows - 1) / kRewardChunkRows;
+  nn::parallel_tasks(chunks, [&](std::int64_t c) {
+    nn::NoGradGuard chunk_no_grad;  // this thread's graph
+    nn::Graph& graph = nn::current_graph();
     const nn::Graph::Mark mark = graph.mark();
-    Tensor input = nn::concat({nn::slice(feat, r0, r1, 0), nn::slice(action, r0, r1, 0)}, -1);
-    std::vector<Tensor> logits = all_logits(input, stacked);
-    for (int k = 0; k < members(); ++k) preds[k] = probabilities(logits[k]);
-    const std::int64_t s = preds[0].dim(1);
-    mean.resize(s);
-    var.resize(s);
-    for (std::int64_t i = r0; i < r1; ++i) {
-      const std::int64_t row = (i - r0) * s;
-      // Per latent d: mean and population variance across the members, summed in member order.
-      std::fill(mean.begin(), mean.end(), 0.0f);
-      for (const Tensor& p : preds) {
-        const float* pr = p.data() + row;
-        for (std::int64_t d = 0; d < s; ++d) mean[d] += pr[d];
-      }
-      for (std::int64_t d = 0; d < s; ++d) mean[d] *= inv_k;
-      std::fill(var.begin(), var.end(), 0.0f);
-      for (const Tensor& p : preds) {
-        const float* pr = p.data() + row;
-        for (std::int64_t d = 0; d < s; ++d) {
-          const float diff = pr[d] - mean[d];
-          var[d] += diff * diff;
-        }
-      }
-      double total = 0.0;
-      for (std::int64_t d = 0; d < s; ++d) {
-        const float v = var[d] * inv_k;
-        total += config_.disag_reward == DisagReward::kVariance ? v : std::sqrt(v);
-      }
-      out[i] = static_cast<float>(total / s);
-    }
-    for (Tensor& p : preds) p = Tensor();
+    const std::int64_t r0 = c * kRewardChunkRows, r1 = std::min(n, r0 + kRewardChunkRows);
+    score_rows(nn::concat({nn::slice(feat, r0, r1, 0), nn::slice(action, r0, r1, 0)}, -1), stacked,
+               out.data() + r0);
     graph.rewind(mark);
-  }
+  });
   scale_raw(out, config_.disag_scale);
   return out;
+}
+
+void LatentDisagreement::score_rows(Tensor input, Tensor stacked, float* out) {
+  const std::vector<Tensor> logits = all_logits(input, stacked);
+  std::vector<Tensor> preds(members());
+  for (int k = 0; k < members(); ++k) preds[k] = probabilities(logits[k]);
+  const std::int64_t rows = input.dim(0), s = preds[0].dim(1);
+  const float inv_k = 1.0f / static_cast<float>(members());
+  std::vector<float> mean(s), var(s);
+  for (std::int64_t i = 0; i < rows; ++i) {
+    const std::int64_t row = i * s;
+    // Per latent d: mean and population variance across the members, summed in member order.
+    std::fill(mean.begin(), mean.end(), 0.0f);
+    for (const Tensor& p : preds) {
+      const float* pr = p.data() + row;
+      for (std::int64_t d = 0; d < s; ++d) mean[d] += pr[d];
+    }
+    for (std::int64_t d = 0; d < s; ++d) mean[d] *= inv_k;
+    std::fill(var.begin(), var.end(), 0.0f);
+    for (const Tensor& p : preds) {
+      const float* pr = p.data() + row;
+      for (std::int64_t d = 0; d < s; ++d) {
+        const float diff = pr[d] - mean[d];
+        var[d] += diff * diff;
+      }
+    }
+    double total = 0.0;
+    for (std::int64_t d = 0; d < s; ++d) {
+      const float v = var[d] * inv_k;
+      total += config_.disag_reward == DisagReward::kVariance ? v : std::sqrt(v);
+    }
+    out[i] = static_cast<float>(total / s);
+  }
 }
 
 }  // namespace indrive::agent

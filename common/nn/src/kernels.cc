@@ -28,6 +28,10 @@ std::atomic<std::uint64_t> g_flops{0};
 // Bumped by every Graph::reset() and rewind(): kept bf16 copies of graph values older than the
 // current generation are stale.
 std::atomic<std::uint64_t> g_graph_generation{1};
+// Bumped by every Graph::reset() only: kept copies of parameters are trusted by their version
+// within one graph, so a rewind (scoring imagined states in chunks) does not convert the same
+// weights again for every chunk.
+std::atomic<std::uint64_t> g_reset_generation{1};
 
 #if INDRIVE_WITH_ONEDNN
 // Products below this many multiply-adds stay on Eigen in fp32 whatever the precision: a
@@ -172,8 +176,9 @@ struct Stamp {
 
 Stamp stamp_of(detail::Lifetime lifetime, const std::uint64_t* version) {
   if (lifetime == detail::Lifetime::kScratch) return {};
-  return {g_graph_generation.load(std::memory_order_relaxed),
-          lifetime == detail::Lifetime::kVersioned ? *version : 0};
+  if (lifetime == detail::Lifetime::kVersioned)
+    return {g_reset_generation.load(std::memory_order_relaxed), *version};
+  return {g_graph_generation.load(std::memory_order_relaxed), 0};
 }
 
 // A grow-only bf16 buffer, left uninitialised (every use overwrites what it reads).
@@ -421,7 +426,10 @@ std::uint64_t gemm_flops() { return g_flops.load(std::memory_order_relaxed); }
 
 namespace detail {
 
-void forget_graph_conversions() { g_graph_generation.fetch_add(1, std::memory_order_relaxed); }
+void forget_graph_conversions(bool reset) {
+  g_graph_generation.fetch_add(1, std::memory_order_relaxed);
+  if (reset) g_reset_generation.fetch_add(1, std::memory_order_relaxed);
+}
 
 std::uint64_t next_parameter_version() {
   static std::atomic<std::uint64_t> counter{1};

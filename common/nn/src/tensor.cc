@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
+#include <mutex>
 #include <sstream>
 
 #if defined(__GLIBC__)
@@ -160,7 +162,7 @@ std::size_t Graph::arena_capacity_bytes() const {
 }
 
 void Graph::reset() {
-  detail::forget_graph_conversions();
+  detail::forget_graph_conversions(true);
   high_water_ = std::max(high_water_, arena_used_bytes());
   for (Block& b : blocks_) b.used = 0;
   current_ = 0;
@@ -178,7 +180,7 @@ Graph::Mark Graph::mark() const {
 }
 
 void Graph::rewind(const Mark& mark) {
-  detail::forget_graph_conversions();
+  detail::forget_graph_conversions(false);
   INDRIVE_CHECK_EQ(tape_.size(), mark.tape)
       << "rewind() past recorded ops: only scratch work under NoGradGuard can be rewound";
   INDRIVE_CHECK(mark.block <= current_ && num_nodes_ >= mark.nodes)
@@ -403,5 +405,26 @@ void set_threads(int threads) {
 }
 
 int threads() { return g_threads > 0 ? g_threads : omp_get_max_threads(); }
+
+void parallel_tasks(std::int64_t n, const std::function<void(std::int64_t)>& task) {
+  const int workers =
+      omp_in_parallel() ? 1 : static_cast<int>(std::min<std::int64_t>(omp_get_max_threads(), n));
+  if (workers <= 1) {
+    for (std::int64_t i = 0; i < n; ++i) task(i);
+    return;
+  }
+  std::exception_ptr error;
+  std::mutex error_mutex;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(workers)
+  for (std::int64_t i = 0; i < n; ++i) {
+    try {
+      task(i);
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+    }
+  }
+  if (error) std::rethrow_exception(error);
+}
 
 }  // namespace indrive::nn

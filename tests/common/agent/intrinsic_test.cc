@@ -171,6 +171,50 @@ TEST(LatentDisagreement, RewardIsTheScaledMeanVarianceAcrossMembers) {
   EXPECT_NEAR(ld_std.last_raw_std(), std::abs(std_reward[0] - std_reward[1]) / (2 * scale), 1e-6);
 }
 
+// Imagined states are scored in fixed chunks that run in parallel, each on its own thread and
+// graph: the rewards are the same for one thread and two, bitwise, and a row of the last,
+// partial chunk is the one computed from the members' own predictions.
+TEST(LatentDisagreement, RewardsOverManyChunksDoNotDependOnTheThreadCount) {
+  nn::Rng rng(16);
+  const WorldModelConfig model = preset("tiny").world_model;
+  LatentDisagreement ld(small_intrinsic(Method::kDisag), model, rng);
+  nn::current_graph().reset();
+  const int n = 3 * LatentDisagreement::kRewardChunkRows + 37;
+  Tensor feat = random_tensor(Shape{n, model.feat_dim()}, rng);
+  Tensor action = WorldModel::one_hot(random_actions(n, rng));
+  const int threads = nn::threads();
+  const std::size_t used0 = nn::current_graph().arena_used_bytes();
+  nn::set_threads(1);
+  const std::vector<float> one = ld.reward(feat, action, feat);
+  const std::size_t used1 = nn::current_graph().arena_used_bytes();
+  nn::set_threads(2);
+  const std::vector<float> two = ld.reward(feat, action, feat);
+  const std::size_t used2 = nn::current_graph().arena_used_bytes();
+  nn::set_threads(threads);
+  EXPECT_EQ(one, two);
+  // Every chunk gave its memory back: a call keeps only the members' stacked first weights.
+  const std::size_t stacked = sizeof(float) * (model.feat_dim() + kNumActions) * ld.members() *
+                              small_intrinsic(Method::kDisag).units;
+  EXPECT_GE(used1 - used0, stacked);
+  EXPECT_LT(used1 - used0, stacked + 1024);  // and its node
+  EXPECT_EQ(used2 - used1, used1 - used0);
+  const int row = n - 5;
+  Tensor input = nn::concat({nn::slice(feat, row, row + 1, 0), nn::slice(action, row, row + 1, 0)});
+  const int s = model.stoch_dim();
+  std::vector<Tensor> preds;
+  for (int k = 0; k < ld.members(); ++k) preds.push_back(ld.predict(k, input));
+  double var_sum = 0;
+  for (int d = 0; d < s; ++d) {
+    double mean = 0, var = 0;
+    for (const Tensor& p : preds) mean += p.data()[d] / ld.members();
+    for (const Tensor& p : preds) var += std::pow(p.data()[d] - mean, 2) / ld.members();
+    var_sum += var;
+  }
+  const double expected = 1e4 * var_sum / s;
+  EXPECT_GT(expected, 0.0);
+  EXPECT_NEAR(one[row], expected, 1e-4 * expected);
+}
+
 // The K members' first products are made as one GEMM of their weights side by side: the loss
 // and every gradient must be those of the members run one by one (fp32; the sums' order differs,
 // so within float rounding, not bitwise).

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 #include <vector>
 
 #include "indrive/nn/nn.h"
@@ -280,6 +281,45 @@ TEST(ThreadsTest, TwoThreadsAgreeWithOne) {
   // One thread is bitwise reproducible.
   const std::vector<float> again = conv_model_grads(1);
   EXPECT_EQ(std::memcmp(one.data(), again.data(), one.size() * sizeof(float)), 0);
+}
+
+// Tasks run once each, spread over the threads, each on its own thread's graph: they read the
+// caller's tensors, and the caller's graph is as it was. An exception reaches the caller.
+TEST(ThreadsTest, ParallelTasksRunOnceEachOnTheirThreadsOwnGraph) {
+  Graph& g = current_graph();
+  g.reset();
+  const Tensor input = full({1000}, 3.0f);
+  const std::size_t used = g.arena_used_bytes();
+  set_threads(2);
+  std::vector<float> out(16, 0.0f);
+  std::vector<const Graph*> graphs(16, nullptr);
+  parallel_tasks(16, [&](std::int64_t i) {
+    NoGradGuard no_grad;
+    Graph& mine = current_graph();
+    const Graph::Mark mark = mine.mark();
+    graphs[i] = &mine;
+    out[i] += sum(scale(input, static_cast<float>(i))).item();
+    mine.rewind(mark);
+  });
+  for (int i = 0; i < 16; ++i) EXPECT_EQ(out[i], 3000.0f * i) << "task " << i;
+  EXPECT_EQ(g.arena_used_bytes(), used);
+  EXPECT_TRUE(g.grad_enabled());
+  // Every task ran on the calling thread's graph or on another thread's own one.
+  std::vector<const Graph*> distinct = graphs;
+  std::sort(distinct.begin(), distinct.end());
+  distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+  EXPECT_GE(distinct.size(), 1u);
+  EXPECT_LE(distinct.size(), 2u);
+  EXPECT_EQ(std::count(distinct.begin(), distinct.end(), nullptr), 0);
+  EXPECT_THROW(parallel_tasks(8,
+                              [](std::int64_t i) {
+                                if (i == 5) throw std::runtime_error("task 5 failed");
+                              }),
+               std::runtime_error);
+  set_threads(1);
+  int ran = 0;
+  parallel_tasks(3, [&](std::int64_t) { ++ran; });  // one thread: in order on the caller
+  EXPECT_EQ(ran, 3);
 }
 
 TEST(RngTest, DeterministicAndRoughlyNormal) {

@@ -25,8 +25,13 @@ class LatentDisagreement : public IntrinsicModule {
   // The members' first-layer weights side by side, (feat + 9, K * units).
   nn::Tensor stacked_first_weights();
   int members() const { return static_cast<int>(members_.size()); }
+  // Imagined states scored per chunk by reward(); chunks run in parallel.
+  static constexpr std::int64_t kRewardChunkRows = 512;
 
  private:
+  // The raw reward of each row of `input` (rows, feat + 9) into out[0, rows): the mean over
+  // latents of the members' variance (or standard deviation), before the scale.
+  void score_rows(nn::Tensor input, nn::Tensor stacked, float* out);
   // Per latent group, the softmax of (N, S) logits.
   nn::Tensor probabilities(nn::Tensor logits) const;
 

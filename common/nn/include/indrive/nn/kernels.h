@@ -64,7 +64,8 @@ namespace detail {
 //   - kGraphValue: until the graph is reset or rewound (a node's value, a node's gradient
 //     once its backward runs); converted once per graph and reused.
 //   - kVersioned: while *version keeps its value (a parameter: Parameter::value() for writing
-//     bumps it); converted once per version.
+//     bumps it) and no graph is reset; converted once per version and graph (a rewind keeps
+//     the copy).
 enum class Lifetime { kScratch, kGraphValue, kVersioned };
 
 // One operand of a product: logical (rows, cols); stored row-major as (rows, cols), or as
@@ -77,8 +78,9 @@ struct GemmOperand {
   const std::uint64_t* version = nullptr;  // kVersioned only
 };
 
-// Drops every kept bf16 copy of graph values: Graph::reset() and Graph::rewind() call it.
-void forget_graph_conversions();
+// Drops every kept bf16 copy of graph values, and with `reset` of parameters too:
+// Graph::rewind() calls it with false, Graph::reset() with true.
+void forget_graph_conversions(bool reset);
 
 // dst (m, n), row-major and contiguous, = a * b, or += when `accumulate`. Single products run
 // on the calling thread when called inside a parallel region.
