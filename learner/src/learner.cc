@@ -14,6 +14,7 @@
 #include "indrive/basics/run_dir.h"
 #include "indrive/dds/participant.h"
 #include "indrive/dds/security.h"
+#include "indrive/dds/shm_sweeper.h"
 #include "indrive/learner/evaluation_tally.h"
 #include "indrive/learner/ingest.h"
 #include "indrive/learner/rate_limiter.h"
@@ -403,7 +404,24 @@ struct Learner::Impl {
     interval_chunks = 0;
   }
 
+  // An actor or evaluator ended by a signal leaves its Fast DDS shared-memory segment in
+  // /dev/shm (dds/shm_sweeper.h). The launcher removes them for the processes it runs; the
+  // learner does the same every minute, so that runs whose processes are started by hand, by
+  // compose or on several hosts sharing this one's /dev/shm do not fill it crash by crash.
+  void sweep_shared_memory() {
+    if (!sweeper || Clock::now() < next_sweep) return;
+    next_sweep = Clock::now() + std::chrono::seconds(60);
+    const dds::SweepResult swept = sweeper->sweep(Clock::now());
+    if (swept.removed > 0) {
+      INDRIVE_LOG(kInfo, "learner")
+          << "removed " << swept.removed << " shared-memory segment(s) of ended processes ("
+          << static_cast<double>(swept.removed_bytes) / (1 << 20) << " MiB)";
+    }
+  }
+
   int run_loop(const std::atomic<bool>& stop) {
+    if (fs::is_directory("/dev/shm")) sweeper.emplace("/dev/shm");
+    next_sweep = Clock::now();
     last_checkpoint = Clock::now();
     interval.restart(progress_now());
     while (!stop.load()) {
@@ -421,6 +439,7 @@ struct Learner::Impl {
       if (publisher->take_request() && publisher->republish(done)) ++stats.snapshot_requests;
       if (publisher->seconds_since_announce() >= announce_s) publisher->announce(done);
       log_metrics();
+      sweep_shared_memory();
       if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
       // The budget ends the run once the updates it is owed are done.
       if (budget > 0 && stats.counters.env_steps >= budget &&
@@ -487,6 +506,8 @@ struct Learner::Impl {
   EvaluationTally evaluations;  // evaluators' results, on the metrics lines
   std::int64_t budget = 0;
   std::int64_t snapshot_every = 10;
+  std::optional<dds::SharedMemorySweeper> sweeper;  // of /dev/shm, when there is one
+  Clock::time_point next_sweep{};
   double hold_s = 10.0;
   bool snapshot_due = false;   // snapshot_every updates passed since the last snapshot
   bool snapshot_held = false;  // ... and it waits for a reader to acknowledge the last one
