@@ -436,7 +436,9 @@ struct Evaluator::Impl {
   // When the learner's last heartbeat arrived (steady clock ticks; 0: never).
   std::atomic<Clock::rep> last_learner_beat{0};
   Clock::time_point connected_at{};
-  RejoinSchedule rejoin{20.0, 160.0};
+  // From actor.rejoin_after_s and rejoin_max_s when a learner's snapshots are evaluated;
+  // never replaces a participant otherwise.
+  RejoinSchedule rejoin{0.0, 0.0};
   std::uint64_t rejoins = 0;  // participants replaced (maybe_rejoin)
   // The DDS endpoints when a learner's snapshot is evaluated; the writers belong to it.
   std::unique_ptr<dds::EndpointSet> endpoints;
