@@ -406,8 +406,8 @@ struct Learner::Impl {
 
   // An actor or evaluator ended by a signal leaves its Fast DDS shared-memory segment in
   // /dev/shm (dds/shm_sweeper.h). The launcher removes them for the processes it runs; the
-  // learner does the same every minute, so that runs whose processes are started by hand, by
-  // compose or on several hosts sharing this one's /dev/shm do not fill it crash by crash.
+  // learner does the same every minute, so that runs whose processes are started by hand or by
+  // compose, in containers sharing the learner's /dev/shm, do not fill it crash by crash.
   void sweep_shared_memory() {
     if (!sweeper || Clock::now() < next_sweep) return;
     next_sweep = Clock::now() + std::chrono::seconds(60);
