@@ -437,9 +437,11 @@ Participant::Participant(const ParticipantOptions& options)
               << "DDS Security has not authenticated participant " << stalled.guid << " "
               << std::fixed << std::setprecision(0) << stalled.pending_s
               << " s after discovering it (handshakes take 0.02-2.1 s in the tests): nothing "
-                 "flows between the two until it completes, and a stalled one never does; an "
-                 "actor or evaluator that has not heard its learner replaces its participant "
-                 "(actor.rejoin_after_s), any other process must be restarted";
+                 "flows between the two until it completes, and a stalled one never does. "
+                 "Harmless between two actors or evaluators (each uses only what the learner "
+                 "writes and ignores the others' heartbeats); between the learner and an actor or "
+                 "evaluator, that one replaces its participant once it has not heard the learner "
+                 "for actor.rejoin_after_s";
         }
       }
     });

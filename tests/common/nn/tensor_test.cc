@@ -6,7 +6,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
+#include <set>
 #include <stdexcept>
+#include <thread>
 #include <vector>
 
 #include "indrive/nn/nn.h"
@@ -293,24 +296,34 @@ TEST(ThreadsTest, ParallelTasksRunOnceEachOnTheirThreadsOwnGraph) {
   set_threads(2);
   std::vector<float> out(16, 0.0f);
   std::vector<const Graph*> graphs(16, nullptr);
+  std::vector<std::thread::id> threads(16);
   parallel_tasks(16, [&](std::int64_t i) {
     NoGradGuard no_grad;
     Graph& mine = current_graph();
     const Graph::Mark mark = mine.mark();
     graphs[i] = &mine;
+    threads[i] = std::this_thread::get_id();
     out[i] += sum(scale(input, static_cast<float>(i))).item();
     mine.rewind(mark);
   });
   for (int i = 0; i < 16; ++i) EXPECT_EQ(out[i], 3000.0f * i) << "task " << i;
   EXPECT_EQ(g.arena_used_bytes(), used);
   EXPECT_TRUE(g.grad_enabled());
-  // Every task ran on the calling thread's graph or on another thread's own one.
-  std::vector<const Graph*> distinct = graphs;
-  std::sort(distinct.begin(), distinct.end());
-  distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
-  EXPECT_GE(distinct.size(), 1u);
-  EXPECT_LE(distinct.size(), 2u);
-  EXPECT_EQ(std::count(distinct.begin(), distinct.end(), nullptr), 0);
+  // Every task ran on its thread's own graph: one graph per thread, none shared by two
+  // threads, the calling thread's being `g`, and no more threads than were set.
+  std::map<std::thread::id, const Graph*> graph_of;
+  std::set<const Graph*> distinct;
+  for (int i = 0; i < 16; ++i) {
+    ASSERT_NE(graphs[i], nullptr) << "task " << i;
+    const auto [it, first] = graph_of.emplace(threads[i], graphs[i]);
+    EXPECT_EQ(it->second, graphs[i]) << "task " << i << " ran on another graph of its thread";
+    distinct.insert(graphs[i]);
+  }
+  EXPECT_EQ(distinct.size(), graph_of.size()) << "two threads shared a graph";
+  EXPECT_LE(graph_of.size(), 2u);
+  if (const auto it = graph_of.find(std::this_thread::get_id()); it != graph_of.end()) {
+    EXPECT_EQ(it->second, &g);
+  }
   EXPECT_THROW(parallel_tasks(8,
                               [](std::int64_t i) {
                                 if (i == 5) throw std::runtime_error("task 5 failed");
