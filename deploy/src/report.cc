@@ -217,6 +217,27 @@ std::optional<std::map<int, double>> route_means_by_seed(const Table& table,
   return sums;
 }
 
+// "s0 25.0 / 0.0, s1 ...": each seed's average over routes in every town of the table, in
+// its column order; "-" when some town's routes were not evaluated with the same seeds.
+std::string per_seed_averages(const Table& table, const std::string& method) {
+  std::vector<std::map<int, double>> towns;
+  for (const auto& town : table.towns) {
+    auto means = route_means_by_seed(table, method, town);
+    if (!means) return "-";
+    towns.push_back(std::move(*means));
+  }
+  if (towns.empty()) return "-";
+  std::string out;
+  for (const auto& [seed, first] : towns.front()) {
+    out += (out.empty() ? "s" : ", s") + std::to_string(seed) + " ";
+    for (std::size_t i = 0; i < towns.size(); ++i) {
+      const auto it = towns[i].find(seed);
+      out += (i > 0 ? " / " : "") + (it == towns[i].end() ? std::string("-") : fixed(it->second));
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 std::optional<SeedInterval> average_over_routes_by_seed(const Table& table,
@@ -299,7 +320,8 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
      << "densities evaluated, then over training seeds; [95% CI] is a t-interval over seeds "
      << "when there are 2 or more, otherwise a Wilson interval on the pooled episodes; n = "
      << "episodes behind the cell. Averages over routes and gaps: with 2 or more seeds, [95% CI] "
-     << "is a t-interval over the seeds' own averages (gaps), none with one seed.\n";
+     << "is a t-interval over the seeds' own averages (gaps), clamped to the possible range, "
+     << "none with one seed; \"per seed\" lists those averages.\n";
   for (const auto& [key, table] : report.tables) {
     md << "\n## " << title_of(key) << "\n";
     for (const auto& town : table.towns) {
@@ -329,8 +351,28 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
         std::find(table.towns.begin(), table.towns.end(), seen_town) != table.towns.end() &&
         std::find(table.towns.begin(), table.towns.end(), heldout_town) != table.towns.end();
     if (has_gap) md << " gap (" << seen_town << " - " << heldout_town << ") |";
+    // With two or three seeds a t-interval is wide (t = 12.7 for two) and clamped to the range;
+    // each seed's own averages say more, so a table where some method has 2 or more seeds lists
+    // them: "s0 25.0 / 0.0" is seed 0's average over routes in each town, in column order.
+    bool several_seeds = false;
+    for (const auto& method : table.methods) {
+      for (const auto& town : table.towns) {
+        const auto means = route_means_by_seed(table, method, town);
+        several_seeds = several_seeds || (means && means->size() >= 2);
+      }
+    }
+    if (several_seeds) {
+      md << " per seed (";
+      for (std::size_t i = 0; i < table.towns.size(); ++i) {
+        md << (i > 0 ? " / " : "") << table.towns[i];
+      }
+      md << ") |";
+    }
     md << "\n|---|";
-    for (std::size_t i = 0; i < table.towns.size() + (has_gap ? 1 : 0); ++i) md << "---|";
+    for (std::size_t i = 0; i < table.towns.size() + (has_gap ? 1 : 0) + (several_seeds ? 1 : 0);
+         ++i) {
+      md << "---|";
+    }
     md << "\n";
     // With 2 or more seeds a cell also carries the t-interval over the seeds' own averages
     // (and gaps), which is what tells two methods apart; one seed's has none.
@@ -356,6 +398,7 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
                             gap_by_seed(table, method, seen_town, heldout_town))
            << " |";
       }
+      if (several_seeds) md << " " << per_seed_averages(table, method) << " |";
       md << "\n";
     }
     bool any_bound = false;
@@ -383,6 +426,7 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
            << " |";
       }
       if (has_gap) md << " |";
+      if (several_seeds) md << " |";
       md << "\n\n*layout bound*: the highest average SR over these routes of a policy that sees "
             "no route and picks its exit by the exits a junction offers, on the built-in "
             "towns' route set `"

@@ -97,6 +97,16 @@ TEST(Report, AveragesAndGapsCarryATIntervalOverSeeds) {
             std::string::npos)
       << md;
   EXPECT_NE(md.find("| icm | 25.0 | 0.0 | 25.0 |"), std::string::npos) << md;
+  // Each seed's own averages (town01 / town02: 75 / 25, 62.5 / 50, 50 / 50), and the one-seed
+  // method's too.
+  EXPECT_NE(
+      md.find("| gap (town01 - town02) | per seed (town01 / town02) |\n|---|---|---|---|---|"),
+      std::string::npos)
+      << md;
+  EXPECT_NE(md.find("20.8 [-43.8, 85.5] | s0 75.0 / 25.0, s1 62.5 / 50.0, s2 50.0 / 50.0 |"),
+            std::string::npos)
+      << md;
+  EXPECT_NE(md.find("| icm | 25.0 | 0.0 | 25.0 | s0 25.0 / 0.0 |"), std::string::npos) << md;
   // Routes evaluated with different seeds have no per-seed average.
   add_episodes(records, "rnd", 0, "town01", "straight", 10, 4, 1);
   add_episodes(records, "rnd", 1, "town01", "two_turn", 10, 4, 1);
