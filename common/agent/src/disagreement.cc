@@ -90,13 +90,9 @@ std::vector<float> LatentDisagreement::reward(Tensor feat, Tensor action, Tensor
   // for any thread count.
   const std::int64_t chunks = (n + kRewardChunkRows - 1) / kRewardChunkRows;
   nn::parallel_tasks(chunks, [&](std::int64_t c) {
-    nn::NoGradGuard chunk_no_grad;  // this thread's graph
-    nn::Graph& graph = nn::current_graph();
-    const nn::Graph::Mark mark = graph.mark();
     const std::int64_t r0 = c * kRewardChunkRows, r1 = std::min(n, r0 + kRewardChunkRows);
     score_rows(nn::concat({nn::slice(feat, r0, r1, 0), nn::slice(action, r0, r1, 0)}, -1), stacked,
                out.data() + r0);
-    graph.rewind(mark);
   });
   scale_raw(out, config_.disag_scale);
   return out;

@@ -406,11 +406,30 @@ void set_threads(int threads) {
 
 int threads() { return g_threads > 0 ? g_threads : omp_get_max_threads(); }
 
+namespace {
+
+// Task i on the calling thread's graph, recording nothing; whatever it allocated there is given
+// back after it, also when it throws.
+void run_scratch_task(const std::function<void(std::int64_t)>& task, std::int64_t i) {
+  Graph& graph = current_graph();
+  const Graph::Mark mark = graph.mark();
+  try {
+    NoGradGuard no_grad;
+    task(i);
+  } catch (...) {
+    graph.rewind(mark);
+    throw;
+  }
+  graph.rewind(mark);
+}
+
+}  // namespace
+
 void parallel_tasks(std::int64_t n, const std::function<void(std::int64_t)>& task) {
   const int workers =
       omp_in_parallel() ? 1 : static_cast<int>(std::min<std::int64_t>(omp_get_max_threads(), n));
   if (workers <= 1) {
-    for (std::int64_t i = 0; i < n; ++i) task(i);
+    for (std::int64_t i = 0; i < n; ++i) run_scratch_task(task, i);
     return;
   }
   std::exception_ptr error;
@@ -418,7 +437,7 @@ void parallel_tasks(std::int64_t n, const std::function<void(std::int64_t)>& tas
 #pragma omp parallel for schedule(dynamic, 1) num_threads(workers)
   for (std::int64_t i = 0; i < n; ++i) {
     try {
-      task(i);
+      run_scratch_task(task, i);
     } catch (...) {
       const std::lock_guard<std::mutex> lock(error_mutex);
       if (!error) error = std::current_exception();

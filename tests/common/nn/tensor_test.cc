@@ -297,15 +297,15 @@ TEST(ThreadsTest, ParallelTasksRunOnceEachOnTheirThreadsOwnGraph) {
   std::vector<float> out(16, 0.0f);
   std::vector<const Graph*> graphs(16, nullptr);
   std::vector<std::thread::id> threads(16);
+  std::vector<int> recording(16, -1);
   parallel_tasks(16, [&](std::int64_t i) {
-    NoGradGuard no_grad;
-    Graph& mine = current_graph();
-    const Graph::Mark mark = mine.mark();
-    graphs[i] = &mine;
+    graphs[i] = &current_graph();
     threads[i] = std::this_thread::get_id();
+    recording[i] = current_graph().grad_enabled();
     out[i] += sum(scale(input, static_cast<float>(i))).item();
-    mine.rewind(mark);
   });
+  // Each task ran without recording, and what it allocated was given back.
+  for (int i = 0; i < 16; ++i) EXPECT_EQ(recording[i], 0) << "task " << i;
   for (int i = 0; i < 16; ++i) EXPECT_EQ(out[i], 3000.0f * i) << "task " << i;
   EXPECT_EQ(g.arena_used_bytes(), used);
   EXPECT_TRUE(g.grad_enabled());
@@ -325,14 +325,26 @@ TEST(ThreadsTest, ParallelTasksRunOnceEachOnTheirThreadsOwnGraph) {
     EXPECT_EQ(it->second, &g);
   }
   EXPECT_THROW(parallel_tasks(8,
-                              [](std::int64_t i) {
-                                if (i == 5) throw std::runtime_error("task 5 failed");
+                              [&](std::int64_t i) {
+                                const Tensor scratch = scale(input, 2.0f);
+                                if (i == 5 && scratch.numel() == 1000)
+                                  throw std::runtime_error("task 5 failed");
                               }),
                std::runtime_error);
+  EXPECT_EQ(g.arena_used_bytes(), used) << "a task that threw kept its allocations";
   set_threads(1);
   int ran = 0;
   parallel_tasks(3, [&](std::int64_t) { ++ran; });  // one thread: in order on the caller
   EXPECT_EQ(ran, 3);
+  EXPECT_THROW(parallel_tasks(3,
+                              [&](std::int64_t i) {
+                                const Tensor scratch = scale(input, 2.0f);
+                                if (i == 1 && scratch.numel() == 1000)
+                                  throw std::runtime_error("task 1 failed");
+                              }),
+               std::runtime_error);
+  EXPECT_EQ(g.arena_used_bytes(), used) << "a task that threw on the caller kept its allocations";
+  EXPECT_TRUE(g.grad_enabled());
 }
 
 TEST(RngTest, DeterministicAndRoughlyNormal) {

@@ -338,11 +338,12 @@ int threads();
 
 // Runs task(i) for every i in [0, n), spread over the engine's threads one task at a time, for
 // independent pieces of work that are each too small to split well op by op (scoring imagined
-// states in chunks). A task runs on one thread, on that thread's own graph (current_graph() is
-// thread-local), so its ops run single-threaded: results do not depend on the thread count.
-// Each task must leave its graph as it found it (take a mark, rewind to it) and record no op
-// for backward (work under a NoGradGuard made inside the task). Tasks may read tensors of the
-// calling thread's graph. The first exception a task throws is rethrown once all have run.
+// states in chunks). A task runs on one thread, on that thread's own graph
+// (current_graph() is thread-local), so its ops run single-threaded: results do not depend on
+// the thread count. A task records nothing for backward (it runs under a NoGradGuard), and what
+// it allocates in its graph is given back when it returns (a rewind), so it copies its results
+// out, e.g. into rows of a tensor of the caller. Tasks may read tensors of the calling thread's
+// graph. The first exception a task throws is rethrown once all have run.
 void parallel_tasks(std::int64_t n, const std::function<void(std::int64_t)>& task);
 
 }  // namespace indrive::nn
