@@ -324,25 +324,20 @@ TEST(ThreadsTest, ParallelTasksRunOnceEachOnTheirThreadsOwnGraph) {
   if (const auto it = graph_of.find(std::this_thread::get_id()); it != graph_of.end()) {
     EXPECT_EQ(it->second, &g);
   }
-  EXPECT_THROW(parallel_tasks(8,
-                              [&](std::int64_t i) {
-                                const Tensor scratch = scale(input, 2.0f);
-                                if (i == 5 && scratch.numel() == 1000)
-                                  throw std::runtime_error("task 5 failed");
-                              }),
-               std::runtime_error);
+  // Task `failing` allocates and then throws; the others only allocate.
+  const auto tasks_failing_at = [&](std::int64_t failing) {
+    return [&input, failing](std::int64_t i) {
+      const Tensor scratch = scale(input, 2.0f);
+      if (i == failing && scratch.numel() == 1000) throw std::runtime_error("task failed");
+    };
+  };
+  EXPECT_THROW(parallel_tasks(8, tasks_failing_at(5)), std::runtime_error);
   EXPECT_EQ(g.arena_used_bytes(), used) << "a task that threw kept its allocations";
   set_threads(1);
   int ran = 0;
   parallel_tasks(3, [&](std::int64_t) { ++ran; });  // one thread: in order on the caller
   EXPECT_EQ(ran, 3);
-  EXPECT_THROW(parallel_tasks(3,
-                              [&](std::int64_t i) {
-                                const Tensor scratch = scale(input, 2.0f);
-                                if (i == 1 && scratch.numel() == 1000)
-                                  throw std::runtime_error("task 1 failed");
-                              }),
-               std::runtime_error);
+  EXPECT_THROW(parallel_tasks(3, tasks_failing_at(1)), std::runtime_error);
   EXPECT_EQ(g.arena_used_bytes(), used) << "a task that threw on the caller kept its allocations";
   EXPECT_TRUE(g.grad_enabled());
 }
