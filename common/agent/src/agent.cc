@@ -169,19 +169,20 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
 
   // World model: trained in pretrain and dreamer, a frozen feature extractor in finetune.
   WorldModelOutput out;
-  Tensor total;
+  // The update's losses; stop-gradients keep each inside its own part of the model.
+  std::vector<Tensor> losses;
   if (phase == Phase::kFinetune) {
     {
       nn::NoGradGuard frozen;
       out = wm_->observe(batch, false, rng_);
     }
     Tensor target = WorldModel::time_major_column(batch.rewards, b, t);
-    total = nn::mean(
-        nn::twohot_cross_entropy(wm_->reward_logits(nn::stop_gradient(out.features)), target));
-    out.reward = total.item();
+    losses.push_back(nn::mean(
+        nn::twohot_cross_entropy(wm_->reward_logits(nn::stop_gradient(out.features)), target)));
+    out.reward = losses.back().item();
   } else {
     out = wm_->observe(batch, phase == Phase::kDreamer, rng_);
-    total = out.loss;
+    losses.push_back(out.loss);
   }
   metrics.insert(metrics.end(), {{"wm/recon", out.recon},
                                  {"wm/kl", out.kl},
@@ -196,8 +197,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     Transitions tr = make_transitions(out.features, out.post_probs,
                                       WorldModel::action_one_hot(batch.actions, b, t),
                                       WorldModel::time_major_column(batch.is_first, b, t), b);
-    Tensor intrinsic_loss = intrinsic_->loss(tr);
-    total = nn::add(total, intrinsic_loss);
+    losses.push_back(intrinsic_->loss(tr));
     metrics.emplace_back("intrinsic/loss", intrinsic_->last_loss());
     timing_.intrinsic = clock.lap(&flops_.intrinsic);
   }
@@ -228,7 +228,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   }
   timing_.reward = clock.lap(&flops_.reward);
   BehaviorMetrics bm;
-  total = nn::add(total, behavior.loss(traj, rewards, &bm));
+  losses.push_back(behavior.loss(traj, rewards, &bm));
   const std::string prefix = task_phase ? "task/" : "expl/";
   metrics.insert(metrics.end(), {{prefix + "reward", bm.reward_mean},
                                  {prefix + "return", bm.return_mean},
@@ -239,9 +239,9 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
                                  {prefix + "entropy", bm.entropy}});
   timing_.behavior = clock.lap(&flops_.behavior);
 
-  // One backward for all losses; stop-gradients keep each loss inside its own part, and only
-  // the optimisers of the parts that train in this phase are stepped.
-  graph.backward(total);
+  // One backward for all losses, its independent parts side by side on the engine's threads;
+  // only the optimisers of the parts that train in this phase are stepped.
+  graph.backward(losses);
   timing_.backward = clock.lap(&flops_.backward);
   if (phase != Phase::kFinetune) {
     const nn::StepStats s = wm_opt_->step();

@@ -17,12 +17,12 @@ using ConstArray = Eigen::Map<const Eigen::ArrayXf>;
 
 // The gradient buffer of an input, allocated zeroed on first use; nullptr when the input does
 // not take a gradient.
-inline float* grad_of(Node* n) { return current_graph().grad_buffer(n); }
+inline float* grad_of(Node* n) { return gradient_graph().grad_buffer(n); }
 
 // The gradient buffer of an input for an op that writes every element: *fresh tells whether
 // it is uninitialised (assign) or already holds contributions (accumulate).
 inline float* grad_for_write(Node* n, bool* fresh) {
-  return current_graph().grad_buffer_for_write(n, fresh);
+  return gradient_graph().grad_buffer_for_write(n, fresh);
 }
 
 // Below this many elements, elementwise loops stay on one thread (a parallel region costs more).

@@ -6,6 +6,7 @@
 #include <sys/mman.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -119,6 +120,14 @@ void Graph::free_blocks() {
 }
 
 void* Graph::alloc_bytes(std::size_t bytes) {
+  if (shared_) {
+    const std::lock_guard<std::mutex> lock(shared_mutex_);
+    return alloc_bytes_unlocked(bytes);
+  }
+  return alloc_bytes_unlocked(bytes);
+}
+
+void* Graph::alloc_bytes_unlocked(std::size_t bytes) {
   bytes = round_up(std::max<std::size_t>(bytes, 1));
   // Move on through the kept blocks until one has room; a step that repeats the previous one
   // walks the same blocks with the same offsets.
@@ -271,9 +280,120 @@ void Graph::backward(Tensor loss) {
   }
 }
 
+namespace {
+
+// Set on a thread while it runs a part of another graph's backward.
+thread_local Graph* t_gradient_graph = nullptr;
+
+// Union-find over the (at most 32) losses of one backward.
+struct LossSets {
+  int parent[32];
+  explicit LossSets(int n) {
+    for (int i = 0; i < n; ++i) parent[i] = i;
+  }
+  int find(int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  }
+  // Joins every loss whose bit is set in `bits`.
+  void join(std::uint32_t bits) {
+    const int first = std::countr_zero(bits);
+    for (bits &= bits - 1; bits != 0; bits &= bits - 1) {
+      const int a = find(first), b = find(std::countr_zero(bits));
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  }
+};
+
+}  // namespace
+
+void Graph::run_backward_part(const std::vector<detail::Node*>& part) {
+  for (detail::Node* node : part)
+    if (node->grad != nullptr) node->backward(*node);
+}
+
+int Graph::backward(std::span<const Tensor> losses) {
+  INDRIVE_CHECK(!losses.empty()) << "backward() of no losses";
+  INDRIVE_CHECK_LE(losses.size(), 32u) << "backward() of more than 32 losses at once";
+  const int n = static_cast<int>(losses.size());
+  for (const Tensor& loss : losses) {
+    INDRIVE_CHECK(loss.defined()) << "backward() of an undefined tensor";
+    INDRIVE_CHECK_EQ(loss.numel(), 1)
+        << "backward() needs scalar losses, got shape " << loss.shape().str();
+  }
+  // Which losses reach each node: tape order is topological, so one pass in reverse carries
+  // every loss's bit from a node to its inputs (and from a view to the tensor it views).
+  LossSets sets(n);
+  std::vector<detail::Node*> persistent;  // parameters reached, whose bits outlive the step
+  auto reach = [&](detail::Node* node, std::uint32_t bits) {
+    for (; node != nullptr && node->requires_grad; node = node->view_of) {
+      if (node->reached_by == 0 && node->persistent) persistent.push_back(node);
+      if ((node->reached_by | bits) == node->reached_by) return;
+      node->reached_by |= bits;
+      if (std::popcount(node->reached_by) > 1) sets.join(node->reached_by);
+    }
+  };
+  for (int i = 0; i < n; ++i) reach(losses[i].node(), std::uint32_t{1} << i);
+  for (auto it = tape_.rbegin(); it != tape_.rend(); ++it) {
+    const std::uint32_t bits = (*it)->reached_by;
+    if (bits == 0) continue;
+    for (detail::Node* in : (*it)->in) reach(in, bits);
+  }
+  // One list of nodes per part, each in reverse creation order.
+  std::vector<std::vector<detail::Node*>> parts(static_cast<std::size_t>(n));
+  for (auto it = tape_.rbegin(); it != tape_.rend(); ++it) {
+    const std::uint32_t bits = (*it)->reached_by;
+    if (bits != 0) parts[sets.find(std::countr_zero(bits))].push_back(*it);
+  }
+  for (detail::Node* p : persistent) p->reached_by = 0;
+  std::erase_if(parts, [](const std::vector<detail::Node*>& p) { return p.empty(); });
+  for (const Tensor& loss : losses)
+    if (loss.node()->requires_grad) grad_buffer(loss.node())[0] += 1.0f;
+
+  const int workers = omp_in_parallel() ? 1
+                                        : static_cast<int>(std::min<std::size_t>(
+                                              static_cast<std::size_t>(threads()), parts.size()));
+  const int count = static_cast<int>(parts.size());
+  if (workers <= 1) {
+    for (const auto& part : parts) run_backward_part(part);
+    return count;
+  }
+  // Largest part first, so that the others fill in beside it.
+  std::stable_sort(parts.begin(), parts.end(),
+                   [](const auto& a, const auto& b) { return a.size() > b.size(); });
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  shared_ = true;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(workers)
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    Graph& here = current_graph();
+    const bool helper = &here != this;
+    const Mark mark = here.mark();
+    try {
+      // A helper thread puts gradients into this graph and its scratch into its own, which it
+      // gives back afterwards.
+      t_gradient_graph = this;
+      NoGradGuard no_grad;
+      run_backward_part(parts[i]);
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+    }
+    t_gradient_graph = nullptr;
+    if (helper) here.rewind(mark);
+  }
+  shared_ = false;
+  if (error) std::rethrow_exception(error);
+  return count;
+}
+
 Graph& current_graph() {
   thread_local Graph graph;
   return graph;
+}
+
+Graph& gradient_graph() {
+  return t_gradient_graph != nullptr ? *t_gradient_graph : current_graph();
 }
 
 NoGradGuard::NoGradGuard() : previous_(current_graph().grad_enabled_) {

@@ -286,6 +286,61 @@ TEST(ThreadsTest, TwoThreadsAgreeWithOne) {
   EXPECT_EQ(std::memcmp(one.data(), again.data(), one.size() * sizeof(float)), 0);
 }
 
+// Four losses over three models: `enc` (conv, LayerNorm) reached by losses 0 and 3, `mlp` by
+// loss 1 (through a stop-gradient of `enc`'s output), `head` and a leaf `x` (through a slice, a
+// view) by loss 2. Returns every parameter's and the leaf's gradient after one backward of the
+// four losses at once (`parts`) or of their sum.
+std::vector<float> several_losses_grads(bool parts, int threads) {
+  set_threads(threads);
+  Rng rng(22);
+  ParamGroup group("m");
+  ConvEncoder enc(group, "enc", {.image = 16, .channels = 3, .depth = 4, .min_res = 4}, rng);
+  Mlp mlp(group, "mlp", enc.embed_dim(), {.units = 32, .layers = 2, .out = 4}, rng);
+  Linear head(group, "head", 16, 5, {}, rng);
+  std::vector<float> images(8 * 16 * 16 * 3), xs(6 * 16);
+  for (float& v : images) v = rng.uniform();
+  for (float& v : xs) v = rng.normal();
+  Graph& g = current_graph();
+  g.reset();
+  const Tensor embed = enc(constant({8, 16, 16, 3}, images));
+  const Tensor x = grad_leaf({6, 16}, xs);
+  const std::vector<Tensor> losses = {
+      mean(square(embed)), mean(square(mlp(stop_gradient(embed)))),
+      mean(square(head(slice(x, 1, 5, 0)))),
+      mean(enc(constant({8, 16, 16, 3}, std::vector<float>(images.rbegin(), images.rend()))))};
+  if (parts)
+    EXPECT_EQ(g.backward(losses), 3);
+  else
+    g.backward(add(add(losses[0], losses[1]), add(losses[2], losses[3])));
+  // The leaf's gradient lives in this graph, not in a helper thread's scratch: scratch work on
+  // every thread's graph afterwards leaves it alone.
+  parallel_tasks(
+      4, [](std::int64_t) { std::fill_n(current_graph().alloc(1 << 16), 1 << 16, std::nanf("")); });
+  std::vector<float> out(x.grad(), x.grad() + x.numel());
+  for (const auto& p : group.params()) {
+    out.insert(out.end(), p->grad().begin(), p->grad().end());
+    EXPECT_EQ(p->tensor().node()->reached_by, 0u) << p->name() << " kept its loss bits";
+  }
+  g.reset();
+  set_threads(1);
+  return out;
+}
+
+// The parts of one backward ({0, 3}, {1}, {2}) run on two threads at once and give bitwise the
+// gradients of one backward of the losses' sum.
+TEST(ThreadsTest, BackwardOfSeveralLossesGivesTheGradientsOfTheirSum) {
+  const std::vector<float> sum_one = several_losses_grads(false, 1);
+  const std::vector<float> parts_one = several_losses_grads(true, 1);
+  const std::vector<float> parts_two = several_losses_grads(true, 2);
+  ASSERT_EQ(sum_one.size(), parts_two.size());
+  EXPECT_GT(std::count_if(sum_one.begin(), sum_one.end(), [](float v) { return v != 0.0f; }),
+            static_cast<std::ptrdiff_t>(sum_one.size() * 9 / 10));
+  for (std::size_t i = 0; i < sum_one.size(); ++i) {
+    ASSERT_EQ(sum_one[i], parts_one[i]) << "value " << i << ", one thread";
+    ASSERT_EQ(sum_one[i], parts_two[i]) << "value " << i << ", two threads";
+  }
+}
+
 // Tasks run once each, spread over the threads, each on its own thread's graph: they read the
 // caller's tensors, and the caller's graph is as it was. An exception reaches the caller.
 TEST(ThreadsTest, ParallelTasksRunOnceEachOnTheirThreadsOwnGraph) {

@@ -13,6 +13,7 @@
 #include <functional>
 #include <initializer_list>
 #include <memory>
+#include <mutex>
 #include <new>
 #include <span>
 #include <string>
@@ -95,6 +96,9 @@ struct Node {
   // A parameter leaf's value version, bumped whenever its values are handed out for writing;
   // the kernel layer keeps a bf16 copy per version (kernels.h).
   std::uint64_t version = 0;
+  // Graph::backward of several losses: one bit per loss whose gradient reaches this node
+  // (cleared again before it returns).
+  std::uint32_t reached_by = 0;
 };
 
 }  // namespace detail
@@ -148,6 +152,13 @@ class Graph {
   // Runs reverse mode from a one-element loss: gradients accumulate into every tensor and
   // parameter the loss depends on. Call at most once per recorded graph.
   void backward(Tensor loss);
+  // Reverse mode from several one-element losses, with the gradients of backward(l0 + l1 + ...).
+  // Losses whose gradients meet in some tensor or parameter form one part; the parts' backward
+  // passes run at once as tasks over the engine's threads (each part in the order one backward
+  // would use, its ops single-threaded), so a parameter's gradient is the same for any thread
+  // count. Gradient buffers live in this graph, as with one backward. At most 32 losses.
+  // Returns the number of parts.
+  int backward(std::span<const Tensor> losses);
   // Forgets every tensor of this step and rewinds the arena. Every block is kept (and so are its
   // already-touched pages), so a step that repeats the previous step's allocations gets the
   // same addresses and makes no system allocation and no page fault.
@@ -209,7 +220,10 @@ class Graph {
     std::size_t used = 0;
   };
   void* alloc_bytes(std::size_t bytes);
+  void* alloc_bytes_unlocked(std::size_t bytes);
   void free_blocks();
+  // Runs the recorded backward rules of `part` (reverse creation order) on the calling thread.
+  void run_backward_part(const std::vector<detail::Node*>& part);
 
   std::vector<Block> blocks_;
   std::size_t current_ = 0;  // index of the block that allocations are served from
@@ -218,7 +232,15 @@ class Graph {
   std::size_t num_nodes_ = 0;
   std::vector<detail::Node*> tape_;
   bool grad_enabled_ = true;
+  // While backward parts run on several threads, allocations in this arena (gradient buffers
+  // from every thread, scratch from the calling thread) take this lock.
+  bool shared_ = false;
+  std::mutex shared_mutex_;
 };
+
+// The graph that gradient buffers are allocated in: the current graph, except on a thread
+// that runs a part of another graph's backward (Graph::backward of several losses).
+Graph& gradient_graph();
 
 // The calling thread's current graph; ops allocate their results here.
 Graph& current_graph();
