@@ -239,9 +239,16 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
                                  {prefix + "entropy", bm.entropy}});
   timing_.behavior = clock.lap(&flops_.behavior);
 
-  // One backward for all losses, its independent parts side by side on the engine's threads;
-  // only the optimisers of the parts that train in this phase are stepped.
-  graph.backward(losses);
+  // One backward for all losses: its independent parts side by side on the engine's threads,
+  // or their sum with each op split over the threads. Only the optimisers of the parts that
+  // train in this phase are stepped.
+  if (config_.backward_parts) {
+    graph.backward(losses);
+  } else {
+    Tensor total = losses.front();
+    for (std::size_t i = 1; i < losses.size(); ++i) total = nn::add(total, losses[i]);
+    graph.backward(total);
+  }
   timing_.backward = clock.lap(&flops_.backward);
   if (phase != Phase::kFinetune) {
     const nn::StepStats s = wm_opt_->step();

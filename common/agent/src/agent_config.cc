@@ -61,6 +61,11 @@ const std::vector<Key>& keys() {
           [](AgentConfig& c, std::string_view v) { c.eval_sample = parse_bool("eval_sample", v); }},
       Key{"precision", [](const AgentConfig& c) { return c.precision; },
           [](AgentConfig& c, std::string_view v) { c.precision = std::string(v); }},
+      Key{"backward_parts",
+          [](const AgentConfig& c) { return std::string(c.backward_parts ? "true" : "false"); },
+          [](AgentConfig& c, std::string_view v) {
+            c.backward_parts = parse_bool("backward_parts", v);
+          }},
       INDRIVE_NUMBER_KEY("seed", seed),
       INDRIVE_NUMBER_KEY("world_model.image", world_model.image),
       INDRIVE_NUMBER_KEY("world_model.channels", world_model.channels),
@@ -154,6 +159,7 @@ AgentConfig preset(std::string_view name) {
   if (name == "tiny") {
     wm.image = 32, wm.cnn_depth = 8, wm.deter = 128, units = 128, wm.stoch = 16, wm.classes = 16;
     config.replay.batch = 8, config.replay.length = 16;
+    config.backward_parts = true;
   } else if (name == "cpu") {
     wm.image = 64, wm.cnn_depth = 16, wm.deter = 256, units = 256, wm.stoch = 32, wm.classes = 32;
     config.replay.batch = 16, config.replay.length = 64;

@@ -17,9 +17,14 @@ constexpr const char* kDefaultPreset = "cpu";
 
 // Agent keys whose text is not a number, with the values they may take.
 bool is_text_agent_key(const std::string& key) {
-  static const std::set<std::string> text_keys = {
-      "preset",   "phase", "task", "eval_sample", "intrinsic.method", "intrinsic.disag_reward",
-      "precision"};
+  static const std::set<std::string> text_keys = {"preset",
+                                                  "phase",
+                                                  "task",
+                                                  "eval_sample",
+                                                  "intrinsic.method",
+                                                  "intrinsic.disag_reward",
+                                                  "precision",
+                                                  "backward_parts"};
   return text_keys.contains(key);
 }
 
@@ -57,6 +62,12 @@ void declare_service_schema(config::Schema& schema) {
                         "multiplies it natively (AMX, AVX512_BF16), else fp32");
     } else if (key == "eval_sample") {
       schema.add_bool(name, text == "true", "evaluation samples actions instead of the mode");
+    } else if (key == "backward_parts") {
+      schema.add_bool(name, text == "true",
+                      "the learner's backward pass runs its independent parts (world model, "
+                      "intrinsic module, actor-critic) side by side, one thread each, instead of "
+                      "one after another with each op split over the threads (the tiny preset's "
+                      "default, measured faster there; slower on cpu)");
     } else {
       double value = 0.0;
       std::from_chars(text.data(), text.data() + text.size(), value);
@@ -67,7 +78,8 @@ void declare_service_schema(config::Schema& schema) {
   for (const char* name : {"tiny", "cpu", "small"}) {
     std::vector<std::pair<std::string, std::string>> overrides;
     for (const auto& [key, text] : agent::config_values(agent::preset(name))) {
-      if (key == "preset" || is_text_agent_key(key)) continue;
+      // Text keys are the same in every preset, except the backward's schedule.
+      if (key == "preset" || (is_text_agent_key(key) && key != "backward_parts")) continue;
       overrides.emplace_back(kAgentPrefix + key, text);
     }
     schema.add_preset(name, std::move(overrides),

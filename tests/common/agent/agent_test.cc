@@ -182,16 +182,20 @@ TEST(Agent, CheckpointResumesExactly) {
 }
 
 // Two updates in each phase with 1 and 2 threads: the update's parallel pieces (the backward
-// pass's independent parts, the ensemble's reward chunks) leave every parameter as one thread
-// does, bitwise.
+// pass's independent parts, or its ops, and the ensemble's reward chunks) leave every parameter
+// as one thread does, bitwise.
 TEST(Agent, UpdatesWithTwoThreadsGiveBitwiseTheParametersOfOne) {
-  for (Phase phase : {Phase::kPretrain, Phase::kFinetune, Phase::kDreamer}) {
+  for (const auto& [phase, parts] :
+       {std::pair{Phase::kPretrain, true}, std::pair{Phase::kFinetune, true},
+        std::pair{Phase::kDreamer, true}, std::pair{Phase::kPretrain, false}}) {
     ReplayBuffer replay = dot_replay(phase != Phase::kPretrain);
     const SequenceBatch b1 = replay.sample(2, 8), b2 = replay.sample(2, 8);
     std::vector<std::vector<float>> params;
     for (int threads : {1, 2}) {
       nn::set_threads(threads);
-      Agent agent(tiny_config(phase));
+      AgentConfig config = tiny_config(phase);
+      config.backward_parts = parts;
+      Agent agent(config);
       agent.train_step(b1);
       agent.train_step(b2);
       params.emplace_back();
@@ -203,7 +207,7 @@ TEST(Agent, UpdatesWithTwoThreadsGiveBitwiseTheParametersOfOne) {
     nn::set_threads(1);
     ASSERT_EQ(params[0].size(), params[1].size());
     EXPECT_EQ(std::memcmp(params[0].data(), params[1].data(), params[0].size() * sizeof(float)), 0)
-        << to_string(phase);
+        << to_string(phase) << (parts ? ", parts side by side" : ", op by op");
   }
 }
 

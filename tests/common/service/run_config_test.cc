@@ -44,6 +44,24 @@ TEST(ServiceConfigTest, AgentChoicesNameWhatTheConfigurationChose) {
   EXPECT_FALSE(choices.contains("phase"));
 }
 
+// The backward's schedule differs by preset (parts side by side on tiny, op by op on cpu) and
+// a run may choose it.
+TEST(ServiceConfigTest, BackwardScheduleFollowsThePresetUnlessSet) {
+  testing::TempDir dir;
+  EXPECT_FALSE(ServiceConfig::resolve({.run_dir = dir.path() / "r"}).agent().backward_parts);
+  EXPECT_TRUE(ServiceConfig::resolve({.run_dir = dir.path() / "r", .overrides = {"preset=tiny"}})
+                  .agent()
+                  .backward_parts);
+  EXPECT_FALSE(ServiceConfig::resolve({.run_dir = dir.path() / "r",
+                                       .overrides = {"preset=tiny", "agent.backward_parts=false"}})
+                   .agent()
+                   .backward_parts);
+  EXPECT_TRUE(ServiceConfig::resolve({.run_dir = dir.path() / "r",
+                                      .overrides = {"preset=cpu", "agent.backward_parts=true"}})
+                  .agent()
+                  .backward_parts);
+}
+
 TEST(ServiceConfigTest, DdsSecurityFlagNamesTheFolder) {
   testing::TempDir dir;
   const auto off = ServiceConfig::resolve({.run_dir = dir.path() / "r"});

@@ -143,6 +143,12 @@ struct AgentConfig {
   // AVX512_BF16; else fp32), "fp32" or "bf16". Parameters, optimiser state and every other op
   // stay fp32 (nn/kernels.h). Process-wide: an Agent applies it when it is made.
   std::string precision = "auto";
+  // The backward pass of an update runs its independent parts (world model, intrinsic module,
+  // actor-critic) side by side, one thread each (true), or one after another with each op split
+  // over the threads (false). Gradients are bitwise the same either way with one thread; which
+  // is faster depends on the sizes, measured per preset (docs/architecture.md section 8): true
+  // for tiny, false for cpu and small.
+  bool backward_parts = false;
   std::uint64_t seed = 0;
 };
 
