@@ -18,6 +18,11 @@
 //     adam.step();                                     // clip, update, zero the grads
 //   }
 //
+// Several models trained in one step, whose losses share no parameter (a world model and an
+// actor-critic on stop-gradient features): graph.backward(std::vector<Tensor>{wm_loss, ac_loss})
+// gives the gradients of their sum and runs the independent parts side by side on the engine's
+// threads (tensor.h).
+//
 // Inference without a tape (actors): wrap the forward pass in a NoGradGuard and call
 // current_graph().reset() once per step. Tensors die at reset(); copy out what must survive.
 // Parameters are saved and restored with save_params / load_params (serialize.h).
