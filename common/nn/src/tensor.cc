@@ -285,6 +285,23 @@ namespace {
 // Set on a thread while it runs a part of another graph's backward.
 thread_local Graph* t_gradient_graph = nullptr;
 
+// Runs fn(i) for every i in [0, n) on `workers` OpenMP threads, one i at a time each; the first
+// exception fn throws is rethrown once all have run.
+void run_on_threads(std::int64_t n, int workers, const std::function<void(std::int64_t)>& fn) {
+  std::exception_ptr error;
+  std::mutex error_mutex;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(workers)
+  for (std::int64_t i = 0; i < n; ++i) {
+    try {
+      fn(i);
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+    }
+  }
+  if (error) std::rethrow_exception(error);
+}
+
 // Union-find over the (at most 32) losses of one backward.
 struct LossSets {
   int parent[32];
@@ -361,29 +378,33 @@ int Graph::backward(std::span<const Tensor> losses) {
   // Largest part first, so that the others fill in beside it.
   std::stable_sort(parts.begin(), parts.end(),
                    [](const auto& a, const auto& b) { return a.size() > b.size(); });
-  std::exception_ptr error;
-  std::mutex error_mutex;
   shared_ = true;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(workers)
-  for (std::size_t i = 0; i < parts.size(); ++i) {
-    Graph& here = current_graph();
-    const bool helper = &here != this;
-    const Mark mark = here.mark();
-    try {
+  try {
+    run_on_threads(count, workers, [&](std::int64_t i) {
       // A helper thread puts gradients into this graph and its scratch into its own, which it
       // gives back afterwards.
+      Graph& here = current_graph();
+      const bool helper = &here != this;
+      const Mark mark = here.mark();
+      const auto done = [&] {
+        t_gradient_graph = nullptr;
+        if (helper) here.rewind(mark);
+      };
       t_gradient_graph = this;
-      NoGradGuard no_grad;
-      run_backward_part(parts[i]);
-    } catch (...) {
-      const std::lock_guard<std::mutex> lock(error_mutex);
-      if (!error) error = std::current_exception();
-    }
-    t_gradient_graph = nullptr;
-    if (helper) here.rewind(mark);
+      try {
+        NoGradGuard no_grad;
+        run_backward_part(parts[static_cast<std::size_t>(i)]);
+      } catch (...) {
+        done();
+        throw;
+      }
+      done();
+    });
+  } catch (...) {
+    shared_ = false;
+    throw;
   }
   shared_ = false;
-  if (error) std::rethrow_exception(error);
   return count;
 }
 
@@ -552,18 +573,7 @@ void parallel_tasks(std::int64_t n, const std::function<void(std::int64_t)>& tas
     for (std::int64_t i = 0; i < n; ++i) run_scratch_task(task, i);
     return;
   }
-  std::exception_ptr error;
-  std::mutex error_mutex;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(workers)
-  for (std::int64_t i = 0; i < n; ++i) {
-    try {
-      run_scratch_task(task, i);
-    } catch (...) {
-      const std::lock_guard<std::mutex> lock(error_mutex);
-      if (!error) error = std::current_exception();
-    }
-  }
-  if (error) std::rethrow_exception(error);
+  run_on_threads(n, workers, [&task](std::int64_t i) { run_scratch_task(task, i); });
 }
 
 }  // namespace indrive::nn
