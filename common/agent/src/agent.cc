@@ -241,9 +241,18 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
 
   // One backward for all losses: its independent parts side by side on the engine's threads,
   // or their sum with each op split over the threads. Only the optimisers of the parts that
-  // train in this phase are stepped.
+  // train in this phase are stepped. With parts, the intrinsic module's and the actor-critic's
+  // optimisers step inside their parts, on the thread that ran the part, while the world
+  // model's part may still run (their time counts as backward); the first loss's optimisers
+  // (world model, reward head) step afterwards over every thread.
+  const int intrinsic_loss = phase == Phase::kPretrain ? 1 : -1;
+  const int behavior_loss = static_cast<int>(losses.size()) - 1;
+  auto step_part = [&](int i) {
+    if (i == intrinsic_loss) intrinsic_->step();
+    if (i == behavior_loss) behavior.step();
+  };
   if (config_.backward_parts) {
-    graph.backward(losses);
+    graph.backward(losses, step_part);
   } else {
     Tensor total = losses.front();
     for (std::size_t i = 1; i < losses.size(); ++i) total = nn::add(total, losses[i]);
@@ -254,12 +263,9 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     const nn::StepStats s = wm_opt_->step();
     metrics.emplace_back("wm/grad_norm", s.grad_norm);
   }
-  if (phase == Phase::kPretrain) {
-    intrinsic_->step();
-  } else {
-    reward_opt_->step();
-  }
-  behavior.step();
+  if (phase != Phase::kPretrain) reward_opt_->step();
+  if (!config_.backward_parts)
+    for (int i = 1; i < static_cast<int>(losses.size()); ++i) step_part(i);
   // Gradients that reached frozen parts (none should) are dropped, never applied later (the
   // optimisers that stepped have zeroed their own).
   if (phase == Phase::kFinetune) wm_->params().zero_grad();

@@ -324,12 +324,16 @@ struct LossSets {
 
 }  // namespace
 
-void Graph::run_backward_part(const std::vector<detail::Node*>& part) {
-  for (detail::Node* node : part)
+void Graph::run_backward_part(const std::vector<detail::Node*>& nodes, std::uint32_t losses,
+                              const std::function<void(int)>& after) {
+  for (detail::Node* node : nodes)
     if (node->grad != nullptr) node->backward(*node);
+  if (!after) return;
+  NoGradGuard no_grad;
+  for (; losses != 0; losses &= losses - 1) after(std::countr_zero(losses));
 }
 
-int Graph::backward(std::span<const Tensor> losses) {
+int Graph::backward(std::span<const Tensor> losses, const std::function<void(int)>& after) {
   INDRIVE_CHECK(!losses.empty()) << "backward() of no losses";
   INDRIVE_CHECK_LE(losses.size(), 32u) << "backward() of more than 32 losses at once";
   const int n = static_cast<int>(losses.size());
@@ -356,14 +360,23 @@ int Graph::backward(std::span<const Tensor> losses) {
     if (bits == 0) continue;
     for (detail::Node* in : (*it)->in) reach(in, bits);
   }
-  // One list of nodes per part, each in reverse creation order.
-  std::vector<std::vector<detail::Node*>> parts(static_cast<std::size_t>(n));
+  // One list of nodes per part, each in reverse creation order, and the part's losses.
+  struct Part {
+    std::vector<detail::Node*> nodes;
+    std::uint32_t losses = 0;
+  };
+  std::vector<Part> parts(static_cast<std::size_t>(n));
   for (auto it = tape_.rbegin(); it != tape_.rend(); ++it) {
     const std::uint32_t bits = (*it)->reached_by;
-    if (bits != 0) parts[sets.find(std::countr_zero(bits))].push_back(*it);
+    if (bits != 0) parts[sets.find(std::countr_zero(bits))].nodes.push_back(*it);
   }
   for (detail::Node* p : persistent) p->reached_by = 0;
-  std::erase_if(parts, [](const std::vector<detail::Node*>& p) { return p.empty(); });
+  for (int i = 0; i < n; ++i) parts[sets.find(i)].losses |= std::uint32_t{1} << i;
+  // A loss that reaches no parameter has no part; its after() runs on this thread at the end.
+  std::uint32_t without_part = 0;
+  for (const Part& p : parts)
+    if (p.nodes.empty()) without_part |= p.losses;
+  std::erase_if(parts, [](const Part& p) { return p.nodes.empty(); });
   for (const Tensor& loss : losses)
     if (loss.node()->requires_grad) grad_buffer(loss.node())[0] += 1.0f;
 
@@ -372,39 +385,45 @@ int Graph::backward(std::span<const Tensor> losses) {
                                               static_cast<std::size_t>(threads()), parts.size()));
   const int count = static_cast<int>(parts.size());
   if (workers <= 1) {
-    for (const auto& part : parts) run_backward_part(part);
-    return count;
-  }
-  // Largest part first, so that the others fill in beside it.
-  std::stable_sort(parts.begin(), parts.end(),
-                   [](const auto& a, const auto& b) { return a.size() > b.size(); });
-  shared_ = true;
-  try {
-    run_on_threads(count, workers, [&](std::int64_t i) {
-      // A helper thread puts gradients into this graph and its scratch into its own, which it
-      // gives back afterwards.
-      Graph& here = current_graph();
-      const bool helper = &here != this;
-      const Mark mark = here.mark();
-      const auto done = [&] {
-        t_gradient_graph = nullptr;
-        if (helper) here.rewind(mark);
-      };
-      t_gradient_graph = this;
-      try {
-        NoGradGuard no_grad;
-        run_backward_part(parts[static_cast<std::size_t>(i)]);
-      } catch (...) {
+    for (const Part& part : parts) run_backward_part(part.nodes, part.losses, after);
+  } else {
+    // Largest part first, so that the others fill in beside it.
+    std::stable_sort(parts.begin(), parts.end(),
+                     [](const Part& a, const Part& b) { return a.nodes.size() > b.nodes.size(); });
+    shared_ = true;
+    try {
+      run_on_threads(count, workers, [&](std::int64_t i) {
+        // A helper thread puts gradients into this graph and its scratch into its own, which it
+        // gives back afterwards.
+        Graph& here = current_graph();
+        const bool helper = &here != this;
+        const Mark mark = here.mark();
+        const auto done = [&] {
+          t_gradient_graph = nullptr;
+          if (helper) here.rewind(mark);
+        };
+        t_gradient_graph = this;
+        try {
+          NoGradGuard no_grad;
+          const Part& part = parts[static_cast<std::size_t>(i)];
+          run_backward_part(part.nodes, part.losses, after);
+        } catch (...) {
+          done();
+          throw;
+        }
         done();
-        throw;
-      }
-      done();
-    });
-  } catch (...) {
+      });
+    } catch (...) {
+      shared_ = false;
+      throw;
+    }
     shared_ = false;
-    throw;
   }
-  shared_ = false;
+  if (after) {
+    NoGradGuard no_grad;
+    for (; without_part != 0; without_part &= without_part - 1)
+      after(std::countr_zero(without_part));
+  }
   return count;
 }
 

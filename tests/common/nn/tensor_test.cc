@@ -8,8 +8,10 @@
 #include <cstring>
 #include <map>
 #include <set>
+#include <span>
 #include <stdexcept>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "indrive/nn/nn.h"
@@ -338,6 +340,87 @@ TEST(ThreadsTest, BackwardOfSeveralLossesGivesTheGradientsOfTheirSum) {
   for (std::size_t i = 0; i < sum_one.size(); ++i) {
     ASSERT_EQ(sum_one[i], parts_one[i]) << "value " << i << ", one thread";
     ASSERT_EQ(sum_one[i], parts_two[i]) << "value " << i << ", two threads";
+  }
+}
+
+std::vector<float> grads_of(const ParamGroup& group) {
+  std::vector<float> out;
+  for (const auto& p : group.params()) {
+    const std::span<const float> g = std::as_const(*p).grad();
+    out.insert(out.end(), g.begin(), g.end());
+  }
+  return out;
+}
+
+// after(i) of a backward of several losses runs once per loss, when the gradients of i's part
+// are complete (they are already those of the whole backward), without recording; what it does
+// to its own part's gradients (here: an optimiser's zeroing) leaves the other parts alone. A
+// loss that reaches no parameter gets its call on the calling thread.
+TEST(ThreadsTest, AfterEachPartSeesItsGradientsComplete) {
+  for (const int threads : {1, 2}) {
+    SCOPED_TRACE(testing::Message() << threads << " threads");
+    Rng rng(23);
+    ParamGroup enc_group("enc"), mlp_group("mlp"), head_group("head");
+    ConvEncoder enc(enc_group, "enc", {.image = 16, .channels = 3, .depth = 4, .min_res = 4}, rng);
+    Mlp mlp(mlp_group, "mlp", enc.embed_dim(), {.units = 32, .layers = 2, .out = 4}, rng);
+    Linear head(head_group, "head", 16, 5, {}, rng);
+    std::vector<float> images(8 * 16 * 16 * 3), xs(6 * 16);
+    for (float& v : images) v = rng.uniform();
+    for (float& v : xs) v = rng.normal();
+    // Losses 0 and 3 reach `enc`, 1 `mlp`, 2 `head`, 4 nothing. `parts`: backward of the five at
+    // once, else of their sum; returns the final gradients of enc, mlp and head.
+    std::vector<std::vector<float>> seen(5);  // in after(i): the gradients of i's part
+    std::vector<std::thread::id> thread_of(5);
+    std::vector<int> calls(5, 0), recording(5, -1);
+    const auto run = [&](bool parts) {
+      set_threads(parts ? threads : 1);
+      Graph& g = current_graph();
+      g.reset();
+      const Tensor embed = enc(constant({8, 16, 16, 3}, images));
+      const Tensor x = constant({6, 16}, xs);
+      const std::vector<Tensor> losses = {
+          mean(square(embed)), mean(square(mlp(stop_gradient(embed)))), mean(square(head(x))),
+          mean(enc(constant({8, 16, 16, 3}, std::vector<float>(images.rbegin(), images.rend())))),
+          mean(square(x))};
+      if (parts) {
+        const ParamGroup* group_of[5] = {&enc_group, &mlp_group, &head_group, &enc_group, nullptr};
+        EXPECT_EQ(g.backward(losses,
+                             [&](int i) {
+                               ++calls[i];
+                               thread_of[i] = std::this_thread::get_id();
+                               recording[i] = current_graph().grad_enabled();
+                               if (group_of[i] != nullptr) seen[i] = grads_of(*group_of[i]);
+                               if (i == 1) mlp_group.zero_grad();
+                             }),
+                  3);
+      } else {
+        g.backward(add(add(add(losses[0], losses[1]), add(losses[2], losses[3])), losses[4]));
+      }
+      std::vector<std::vector<float>> out = {grads_of(enc_group), grads_of(mlp_group),
+                                             grads_of(head_group)};
+      for (ParamGroup* group : {&enc_group, &mlp_group, &head_group}) group->zero_grad();
+      g.reset();
+      set_threads(1);
+      return out;
+    };
+    const std::vector<std::vector<float>> sum = run(false);
+    const std::vector<std::vector<float>> parts = run(true);
+    for (int i = 0; i < 5; ++i) {
+      EXPECT_EQ(calls[i], 1) << "loss " << i;
+      EXPECT_EQ(recording[i], 0) << "loss " << i;
+    }
+    EXPECT_EQ(thread_of[4], std::this_thread::get_id());
+    EXPECT_EQ(thread_of[0], thread_of[3]) << "losses of one part were handed to two threads";
+    ASSERT_FALSE(sum[0].empty());
+    EXPECT_EQ(seen[0], sum[0]);
+    EXPECT_EQ(seen[3], sum[0]);
+    EXPECT_EQ(seen[1], sum[1]);
+    EXPECT_EQ(seen[2], sum[2]);
+    // The final gradients: every part's as with one backward, except what after(1) zeroed.
+    EXPECT_EQ(parts[0], sum[0]);
+    EXPECT_EQ(parts[2], sum[2]);
+    EXPECT_TRUE(std::all_of(parts[1].begin(), parts[1].end(), [](float v) { return v == 0; }));
+    EXPECT_TRUE(std::any_of(sum[1].begin(), sum[1].end(), [](float v) { return v != 0; }));
   }
 }
 

@@ -158,7 +158,13 @@ class Graph {
   // would use, its ops single-threaded), so a parameter's gradient is the same for any thread
   // count. Gradient buffers live in this graph, as with one backward. At most 32 losses.
   // Returns the number of parts.
-  int backward(std::span<const Tensor> losses);
+  //
+  // `after`, when given, is called once for every loss i, as after(i), as soon as every
+  // gradient of i's part is complete: on the thread that ran the part (under a NoGradGuard,
+  // beside parts still running), for each of the part's losses in increasing order, and on the
+  // calling thread for a loss that reaches no parameter. It may read and change what only its
+  // part's losses reach (e.g. step the optimiser of those parameters), nothing else.
+  int backward(std::span<const Tensor> losses, const std::function<void(int)>& after = nullptr);
   // Forgets every tensor of this step and rewinds the arena. Every block is kept (and so are its
   // already-touched pages), so a step that repeats the previous step's allocations gets the
   // same addresses and makes no system allocation and no page fault.
@@ -222,8 +228,10 @@ class Graph {
   void* alloc_bytes(std::size_t bytes);
   void* alloc_bytes_unlocked(std::size_t bytes);
   void free_blocks();
-  // Runs the recorded backward rules of `part` (reverse creation order) on the calling thread.
-  void run_backward_part(const std::vector<detail::Node*>& part);
+  // Runs the recorded backward rules of `nodes` (reverse creation order) on the calling thread,
+  // then after(i) for each loss i in the bit set `losses`.
+  void run_backward_part(const std::vector<detail::Node*>& nodes, std::uint32_t losses,
+                         const std::function<void(int)>& after);
 
   std::vector<Block> blocks_;
   std::size_t current_ = 0;  // index of the block that allocations are served from
