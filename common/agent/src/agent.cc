@@ -1,8 +1,10 @@
 #include "indrive/agent/agent.h"
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <type_traits>
 
 #include "indrive/agent/policy.h"
@@ -59,6 +61,7 @@ class SectionReader {
     pos_ += size;
     return out;
   }
+  bool done() const { return pos_ == data_.size(); }
 
  private:
   std::span<const std::uint8_t> data_;
@@ -130,6 +133,8 @@ Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
                                        nn::AdamConfig{.lr = w.lr, .eps = w.eps, .clip = w.clip});
   reward_opt_ = std::make_unique<nn::Adam>(
       wm_->reward_params(), nn::AdamConfig{.lr = w.lr, .eps = w.eps, .clip = w.clip});
+  cont_opt_ = std::make_unique<nn::Adam>(
+      wm_->params(), nn::AdamConfig{.lr = w.lr, .eps = w.eps, .clip = w.clip}, "cont.");
   if (config_.phase == Phase::kFinetune) set_phase(Phase::kFinetune);
 }
 
@@ -177,9 +182,33 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
       out = wm_->observe(batch, false, rng_);
     }
     Tensor target = WorldModel::time_major_column(batch.rewards, b, t);
-    losses.push_back(nn::mean(
-        nn::twohot_cross_entropy(wm_->reward_logits(nn::stop_gradient(out.features)), target)));
-    out.reward = losses.back().item();
+    const Tensor features = nn::stop_gradient(out.features);
+    Tensor reward = nn::mean(nn::twohot_cross_entropy(wm_->reward_logits(features), target));
+    out.reward = reward.item();
+    // The continuation head on this batch: trained with agent.finetune_cont, else only
+    // measured; either way its mean prediction at the batch's terminal steps is logged (the
+    // frozen head never saw the task's terminal events).
+    Tensor cont_logits;
+    {
+      std::optional<nn::NoGradGuard> frozen;
+      if (!config_.finetune_cont) frozen.emplace();
+      cont_logits = wm_->cont_logits(features);
+    }
+    const Tensor is_terminal = WorldModel::time_major_column(batch.is_terminal, b, t);
+    const Tensor cont =
+        nn::mean(nn::bce_with_logits(cont_logits, nn::rsub_scalar(1.0f, is_terminal)));
+    out.cont = cont.item();
+    double at_terminal = 0.0;
+    int terminals = 0;
+    for (std::int64_t i = 0; i < is_terminal.numel(); ++i) {
+      if (is_terminal.data()[i] == 0.0f) continue;
+      at_terminal += 1.0 / (1.0 + std::exp(-static_cast<double>(cont_logits.data()[i])));
+      ++terminals;
+    }
+    if (terminals > 0) metrics.emplace_back("wm/cont_at_terminal", at_terminal / terminals);
+    losses.push_back(config_.finetune_cont
+                         ? nn::add(reward, nn::scale(cont, config_.world_model.cont_scale))
+                         : reward);
   } else {
     out = wm_->observe(batch, phase == Phase::kDreamer, rng_);
     losses.push_back(out.loss);
@@ -264,6 +293,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     metrics.emplace_back("wm/grad_norm", s.grad_norm);
   }
   if (phase != Phase::kPretrain) reward_opt_->step();
+  if (phase == Phase::kFinetune && config_.finetune_cont) cont_opt_->step();
   if (!config_.backward_parts)
     for (int i = 1; i < static_cast<int>(losses.size()); ++i) step_part(i);
   // Gradients that reached frozen parts (none should) are dropped, never applied later (the
@@ -329,6 +359,9 @@ std::vector<std::uint8_t> Agent::checkpoint_bytes() const {
   put_section(out, rng_bytes);
   put_section(out,
               bytes_of(std::vector<std::int64_t>{train_steps_, task_actor_initialised_ ? 1 : 0}));
+  // Added after the first checkpoints were written: loading one without it leaves the
+  // continuation head's optimiser fresh.
+  put_section(out, cont_opt_->save_state());
   const std::uint32_t crc = indrive::crc32(out.data(), out.size());
   const auto* c = reinterpret_cast<const std::uint8_t*>(&crc);
   out.insert(out.end(), c, c + 4);
@@ -377,6 +410,10 @@ void Agent::load_checkpoint(std::span<const std::uint8_t> data, const std::strin
   const std::vector<float> norms = values_of<float>(in.next());
   const std::span<const std::uint8_t> rng_bytes = in.next();
   const std::vector<std::int64_t> counters = values_of<std::int64_t>(in.next());
+  // Absent from checkpoints written before the continuation head had an optimiser of its own.
+  const std::span<const std::uint8_t> cont_state =
+      in.done() ? std::span<const std::uint8_t>{} : in.next();
+  if (!in.done()) throw AgentError("checkpoint " + name + " has trailing sections");
   if (rng_bytes.size() != sizeof(nn::Rng) || counters.size() != 2 || norms.empty()) {
     throw AgentError("checkpoint " + name + " has malformed state sections");
   }
@@ -384,6 +421,7 @@ void Agent::load_checkpoint(std::span<const std::uint8_t> data, const std::strin
     std::vector<nn::ParamGroup*> g = groups();
     nn::load_params(params, std::span<nn::ParamGroup* const>(g));
     for (std::size_t i = 0; i < opt_states.size(); ++i) optimizers()[i]->load_state(opt_states[i]);
+    if (!cont_state.empty()) cont_opt_->load_state(cont_state);
   } catch (const nn::SerializationError& e) {
     throw AgentError("checkpoint " + name + " does not fit this agent: " + e.what());
   }

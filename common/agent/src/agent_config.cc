@@ -66,6 +66,11 @@ const std::vector<Key>& keys() {
           [](AgentConfig& c, std::string_view v) {
             c.backward_parts = parse_bool("backward_parts", v);
           }},
+      Key{"finetune_cont",
+          [](const AgentConfig& c) { return std::string(c.finetune_cont ? "true" : "false"); },
+          [](AgentConfig& c, std::string_view v) {
+            c.finetune_cont = parse_bool("finetune_cont", v);
+          }},
       INDRIVE_NUMBER_KEY("seed", seed),
       INDRIVE_NUMBER_KEY("world_model.image", world_model.image),
       INDRIVE_NUMBER_KEY("world_model.channels", world_model.channels),

@@ -26,22 +26,41 @@ float grad_norm(const ParamGroup& group) {
   return static_cast<float>(std::sqrt(total));
 }
 
-Adam::Adam(ParamGroup& group, AdamConfig config) : group_(group), config_(config) {
+namespace {
+float grad_norm(std::span<Parameter* const> params) {
+  double total = 0.0;
+  for (const Parameter* p : params) {
+    const std::span<const float> g = p->grad();
+    total += detail::ConstArray(g.data(), static_cast<std::int64_t>(g.size()))
+                 .cast<double>()
+                 .square()
+                 .sum();
+  }
+  return static_cast<float>(std::sqrt(total));
+}
+}  // namespace
+
+Adam::Adam(ParamGroup& group, AdamConfig config, std::string_view prefix)
+    : group_(group), group_size_(group.params().size()), config_(config) {
   for (const auto& p : group.params()) {
+    if (!p->name().starts_with(prefix)) continue;
+    params_.push_back(p.get());
     m_.emplace_back(static_cast<std::size_t>(p->numel()), 0.0f);
     v_.emplace_back(static_cast<std::size_t>(p->numel()), 0.0f);
   }
+  INDRIVE_CHECK(!params_.empty() || group.params().empty())
+      << "no parameter of group '" << group.name() << "' starts with '" << prefix << "'";
 }
 
 StepStats Adam::step() {
-  INDRIVE_CHECK_EQ(m_.size(), group_.params().size()) << "group changed after Adam was created";
+  INDRIVE_CHECK_EQ(group_size_, group_.params().size()) << "group changed after Adam was created";
   StepStats stats;
-  stats.grad_norm = grad_norm(group_);
+  stats.grad_norm = grad_norm(params_);
   if (!std::isfinite(stats.grad_norm)) {
     // A numerical fault is counted and skipped, not applied.
     ++skipped_;
     stats.skipped = true;
-    group_.zero_grad();
+    for (Parameter* p : params_) p->zero_grad();
     return stats;
   }
   const float clip_scale =
@@ -58,7 +77,7 @@ StepStats Adam::step() {
   const float inv_sqrt_c2 = 1.0f / std::sqrt(c2);
   const float decay = 1.0f - lr * config_.weight_decay;
   for (std::size_t i = 0; i < m_.size(); ++i) {
-    Parameter& p = *group_.params()[i];
+    Parameter& p = *params_[i];
     float* w = p.value().data();
     float* g = p.grad().data();
     float* m = m_[i].data();
@@ -90,7 +109,7 @@ std::vector<std::uint8_t> Adam::save_state() const {
   w.i64(skipped_);
   w.u32(static_cast<std::uint32_t>(m_.size()));
   for (std::size_t i = 0; i < m_.size(); ++i) {
-    w.str(group_.params()[i]->name());
+    w.str(params_[i]->name());
     w.i64(static_cast<std::int64_t>(m_[i].size()));
     w.floats(m_[i]);
     w.floats(v_[i]);
@@ -113,7 +132,7 @@ void Adam::load_state(std::span<const std::uint8_t> blob) {
   std::vector<std::vector<float>> m(n), v(n);
   for (std::uint32_t i = 0; i < n; ++i) {
     const std::string pname = r.str();
-    const Parameter& p = *group_.params()[i];
+    const Parameter& p = *params_[i];
     if (pname != p.name())
       throw SerializationError(r.what() + ": parameter '" + pname + "' where '" + p.name() +
                                "' was expected");

@@ -24,7 +24,8 @@ bool is_text_agent_key(const std::string& key) {
                                                   "intrinsic.method",
                                                   "intrinsic.disag_reward",
                                                   "precision",
-                                                  "backward_parts"};
+                                                  "backward_parts",
+                                                  "finetune_cont"};
   return text_keys.contains(key);
 }
 
@@ -68,6 +69,11 @@ void declare_service_schema(config::Schema& schema) {
                       "intrinsic module, actor-critic) side by side, one thread each, instead of "
                       "one after another with each op split over the threads (the tiny preset's "
                       "default, measured faster there; slower on cpu)");
+    } else if (key == "finetune_cont") {
+      schema.add_bool(name, text == "true",
+                      "few-shot also trains the world model's continuation head (stop-gradient "
+                      "features), so imagination learns where task episodes end; the paper keeps "
+                      "the world model frozen (an ablation, docs/architecture.md section 9)");
     } else {
       double value = 0.0;
       std::from_chars(text.data(), text.data() + text.size(), value);

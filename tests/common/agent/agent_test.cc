@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -130,6 +131,122 @@ TEST(Agent, FinetuneLeavesFrozenPartsBitwiseUnchanged) {
   EXPECT_NE(values_of(agent.world_model().reward_params()), reward);
   EXPECT_NE(values_of(agent.task().actor_params()), task_actor);
   EXPECT_NE(values_of(agent.task().critic_params()), task_critic);
+}
+
+// A random-action replay of the dot environment whose episodes end in a terminal event, as
+// the task's episodes do when they leave the route or reach the destination.
+ReplayBuffer dot_replay_with_terminals(int steps = 400) {
+  ReplayBuffer replay(
+      {.capacity = 5000, .height = 32, .width = 32, .has_rewards = true, .seed = 5});
+  synthetic::DotEnv env(32, 6, /*episode_length=*/10);
+  std::vector<std::uint8_t> frame = env.reset();
+  bool first = true;
+  float reward = 0.0f;
+  for (int i = 0; i < steps; ++i) {
+    ReplayStep s;
+    s.frame = frame;
+    s.action = i % 9;
+    s.is_first = first;
+    s.reward = reward;
+    reward = env.step(s.action);
+    s.is_last = s.is_terminal = env.done();
+    replay.add(0, s);
+    first = env.done();
+    frame = first ? env.reset() : env.frame();
+    if (first) reward = 0.0f;
+  }
+  return replay;
+}
+
+std::vector<float> values_named(const nn::ParamGroup& group, bool cont_head) {
+  std::vector<float> out;
+  for (const auto& p : group.params()) {
+    if (p->name().starts_with("cont.") != cont_head) continue;
+    out.insert(out.end(), p->value().begin(), p->value().end());
+  }
+  return out;
+}
+
+// agent.finetune_cont: few-shot trains the continuation head, and nothing else of the world
+// model, towards the task's terminal steps; off (the paper's frozen world model), the head
+// only reports what it predicts there.
+TEST(Agent, FinetuneContTrainsOnlyTheContinuationHead) {
+  nn::set_threads(1);
+  ReplayBuffer replay = dot_replay_with_terminals();
+  const SequenceBatch batch = replay.sample(4, 10);
+  ASSERT_GT(std::count(batch.is_terminal.begin(), batch.is_terminal.end(), 1.0f), 0);
+  for (const bool train_cont : {false, true}) {
+    AgentConfig config = tiny_config(Phase::kFinetune);
+    config.finetune_cont = train_cont;
+    config.world_model.lr = 1e-3f;
+    Agent agent(config);
+    const auto body = values_named(agent.world_model().params(), false);
+    const auto head = values_named(agent.world_model().params(), true);
+    std::vector<float> cont_loss, at_terminal;
+    for (int i = 0; i < 30; ++i) {
+      const TrainMetrics m = agent.train_step(batch);
+      cont_loss.push_back(metric(m, "wm/cont"));
+      at_terminal.push_back(metric(m, "wm/cont_at_terminal"));
+      EXPECT_TRUE(at_terminal.back() > 0.0f && at_terminal.back() < 1.0f) << at_terminal.back();
+    }
+    EXPECT_EQ(values_named(agent.world_model().params(), false), body);
+    if (train_cont) {
+      EXPECT_NE(values_named(agent.world_model().params(), true), head);
+      // It fits the batch's continuation targets (terminal steps included).
+      EXPECT_LT(cont_loss.back(), 0.7f * cont_loss.front())
+          << cont_loss.front() << " -> " << cont_loss.back();
+    } else {
+      EXPECT_EQ(values_named(agent.world_model().params(), true), head);
+      EXPECT_NEAR(cont_loss.back(), cont_loss.front(), 0.05f * cont_loss.front());
+    }
+  }
+}
+
+// The continuation head's optimiser state travels in the checkpoint as a last section; a
+// checkpoint written before it existed (without that section) still loads, the optimiser fresh.
+TEST(Agent, CheckpointsWithoutTheContinuationOptimiserStillLoad) {
+  nn::set_threads(1);
+  AgentConfig config = tiny_config(Phase::kFinetune);
+  config.finetune_cont = true;
+  ReplayBuffer replay = dot_replay_with_terminals();
+  const SequenceBatch b1 = replay.sample(4, 10), b2 = replay.sample(4, 10);
+  Agent a(config);
+  a.train_step(b1);
+  const std::vector<std::uint8_t> bytes = a.checkpoint_bytes();
+  // With the section: the next step is the same bitwise.
+  Agent b(config);
+  b.load_checkpoint(bytes, "with");
+  // Without it: the sections up to the counters, the checksum redone.
+  std::size_t pos = 8, last = 0;
+  while (pos < bytes.size() - 4) {
+    std::uint64_t size = 0;
+    std::memcpy(&size, bytes.data() + pos, sizeof size);
+    last = pos;
+    pos += sizeof size + size;
+  }
+  ASSERT_EQ(pos, bytes.size() - 4);
+  std::vector<std::uint8_t> old(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(last));
+  const std::uint32_t crc = indrive::crc32(old.data(), old.size());
+  const auto* c = reinterpret_cast<const std::uint8_t*>(&crc);
+  old.insert(old.end(), c, c + 4);
+  Agent fresh(config);
+  fresh.load_checkpoint(old, "old");
+  EXPECT_EQ(fresh.train_steps(), 1);
+  const TrainMetrics ma = a.train_step(b2), mb = b.train_step(b2), mf = fresh.train_step(b2);
+  EXPECT_EQ(ma, mb);
+  const auto head_a = values_named(a.world_model().params(), true);
+  EXPECT_EQ(values_named(b.world_model().params(), true), head_a);
+  // A fresh optimiser takes another first step (its moments and bias correction start anew).
+  EXPECT_NE(values_named(fresh.world_model().params(), true), head_a);
+  // Anything after the last section is refused.
+  std::vector<std::uint8_t> longer(bytes.begin(), bytes.end() - 4);
+  const std::uint64_t zero = 0;
+  const auto* z = reinterpret_cast<const std::uint8_t*>(&zero);
+  longer.insert(longer.end(), z, z + sizeof zero);
+  const std::uint32_t crc2 = indrive::crc32(longer.data(), longer.size());
+  const auto* c2 = reinterpret_cast<const std::uint8_t*>(&crc2);
+  longer.insert(longer.end(), c2, c2 + 4);
+  EXPECT_THROW(fresh.load_checkpoint(longer, "longer"), AgentError);
 }
 
 TEST(Agent, DreamerTrainsTheWorldModelAndRewardHead) {

@@ -112,6 +112,38 @@ TEST(AdamTest, StateRoundTripContinuesIdentically) {
   EXPECT_THROW(a2.load_state(blob), SerializationError);
 }
 
+// With a prefix, Adam optimises one head of a group: it clips by the norm of that head's
+// gradients, moves and zeroes only them, and its state names only them; a prefix that matches
+// nothing is a bug.
+TEST(AdamTest, PrefixOptimisesOnlyTheParametersItNames) {
+  ParamGroup g("model");
+  Parameter& body = g.add("body.w", Shape{1});
+  Parameter& head_w = g.add("head.w", Shape{1});
+  Parameter& head_b = g.add("head.b", Shape{1});
+  Adam adam(g, {.lr = 1.0f, .clip = 0.0f}, "head.");
+  body.grad()[0] = 12.0f;
+  head_w.grad()[0] = 3.0f;
+  head_b.grad()[0] = -4.0f;
+  const StepStats stats = adam.step();
+  EXPECT_FLOAT_EQ(stats.grad_norm, 5.0f);  // not 13: the body's gradient is not the head's
+  EXPECT_EQ(body.value()[0], 0.0f);
+  EXPECT_EQ(body.grad()[0], 12.0f);  // left for whoever owns it
+  EXPECT_NEAR(head_w.value()[0], -1.0f, 1e-5f);
+  EXPECT_NEAR(head_b.value()[0], 1.0f, 1e-5f);
+  EXPECT_EQ(head_w.grad()[0], 0.0f);
+  EXPECT_EQ(head_b.grad()[0], 0.0f);
+  // Its state round-trips into another head optimiser of the same group, not into the whole.
+  ParamGroup g2("model");
+  g2.add("body.w", Shape{1});
+  g2.add("head.w", Shape{1});
+  g2.add("head.b", Shape{1});
+  Adam head2(g2, {}, "head."), whole2(g2, {});
+  head2.load_state(adam.save_state());
+  EXPECT_EQ(head2.steps(), 1);
+  EXPECT_THROW(whole2.load_state(adam.save_state()), SerializationError);
+  EXPECT_DEATH(Adam(g, {}, "tail."), "starts with 'tail.'");
+}
+
 // A parameter large enough for the update to be split over threads (the small ones above run
 // in one piece): every element against the reference in double, with clipping, and the same
 // bits with 1 and 2 threads.

@@ -62,6 +62,21 @@ TEST(ServiceConfigTest, BackwardScheduleFollowsThePresetUnlessSet) {
                   .backward_parts);
 }
 
+// Few-shot keeps the world model frozen, continuation head included, unless a run asks for the
+// ablation; a value that is not a boolean is refused.
+TEST(ServiceConfigTest, FinetuneContIsOffUnlessSet) {
+  testing::TempDir dir;
+  EXPECT_FALSE(ServiceConfig::resolve({.run_dir = dir.path() / "r", .overrides = {"preset=tiny"}})
+                   .agent()
+                   .finetune_cont);
+  EXPECT_TRUE(ServiceConfig::resolve({.run_dir = dir.path() / "r",
+                                      .overrides = {"preset=tiny", "agent.finetune_cont=true"}})
+                  .agent()
+                  .finetune_cont);
+  EXPECT_ANY_THROW(ServiceConfig::resolve(
+      {.run_dir = dir.path() / "r", .overrides = {"agent.finetune_cont=sometimes"}}));
+}
+
 TEST(ServiceConfigTest, DdsSecurityFlagNamesTheFolder) {
   testing::TempDir dir;
   const auto off = ServiceConfig::resolve({.run_dir = dir.path() / "r"});

@@ -119,6 +119,7 @@ class Agent {
   std::unique_ptr<ActorCritic> task_;
   std::unique_ptr<nn::Adam> wm_opt_;
   std::unique_ptr<nn::Adam> reward_opt_;
+  std::unique_ptr<nn::Adam> cont_opt_;  // the continuation head alone (agent.finetune_cont)
   std::int64_t train_steps_ = 0;
   bool task_actor_initialised_ = false;
   StepTiming timing_;

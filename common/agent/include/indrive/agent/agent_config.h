@@ -149,6 +149,12 @@ struct AgentConfig {
   // is faster depends on the sizes, measured per preset (docs/architecture.md section 8): true
   // for tiny, false for cpu and small.
   bool backward_parts = false;
+  // Few-shot (finetune) also trains the world model's continuation head, on stop-gradient
+  // features like the reward head, so that imagination learns where the task's episodes end
+  // (leaving the route, reaching the destination: events pretraining never has). The paper
+  // and the project's contract keep the whole world model frozen (false); an ablation
+  // (docs/architecture.md section 9).
+  bool finetune_cont = false;
   std::uint64_t seed = 0;
 };
 

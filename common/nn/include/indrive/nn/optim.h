@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <span>
+#include <string_view>
 #include <vector>
 
 #include "indrive/nn/tensor.h"
@@ -33,10 +34,12 @@ struct StepStats {
 // crash) and zeroes the gradients.
 class Adam {
  public:
-  // The group must outlive the optimiser and must not gain parameters afterwards.
-  Adam(ParamGroup& group, AdamConfig config);
-  // Clips the group's gradients to config.clip by global norm, applies one Adam update, and
-  // zeroes the gradients.
+  // The group must outlive the optimiser and must not gain parameters afterwards. With a
+  // `prefix`, only the group's parameters whose names start with it are optimised (one head of
+  // a model, say); the others are never read or changed (checked: the prefix must match one).
+  Adam(ParamGroup& group, AdamConfig config, std::string_view prefix = {});
+  // Clips the gradients of its parameters to config.clip by global norm, applies one Adam
+  // update, and zeroes those gradients.
   StepStats step();
   // Number of updates applied so far.
   std::int64_t steps() const { return steps_; }
@@ -50,6 +53,8 @@ class Adam {
 
  private:
   ParamGroup& group_;
+  std::size_t group_size_;          // the group's parameter count when the optimiser was made
+  std::vector<Parameter*> params_;  // the group's parameters it optimises
   AdamConfig config_;
   std::int64_t steps_ = 0;
   std::int64_t skipped_ = 0;
