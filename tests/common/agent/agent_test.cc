@@ -139,22 +139,7 @@ ReplayBuffer dot_replay_with_terminals(int steps = 400) {
   ReplayBuffer replay(
       {.capacity = 5000, .height = 32, .width = 32, .has_rewards = true, .seed = 5});
   synthetic::DotEnv env(32, 6, /*episode_length=*/10);
-  std::vector<std::uint8_t> frame = env.reset();
-  bool first = true;
-  float reward = 0.0f;
-  for (int i = 0; i < steps; ++i) {
-    ReplayStep s;
-    s.frame = frame;
-    s.action = i % 9;
-    s.is_first = first;
-    s.reward = reward;
-    reward = env.step(s.action);
-    s.is_last = s.is_terminal = env.done();
-    replay.add(0, s);
-    first = env.done();
-    frame = first ? env.reset() : env.frame();
-    if (first) reward = 0.0f;
-  }
+  synthetic::collect_random(env, replay, steps, 9, /*terminal_ends=*/true);
   return replay;
 }
 

@@ -53,8 +53,10 @@ class DotEnv {
 };
 
 // Fills a replay buffer with `steps` steps of random actions (one stream), recording the
-// reward of arriving at each frame when the buffer keeps rewards.
-inline void collect_random(DotEnv& env, ReplayBuffer& replay, int steps, std::uint64_t seed) {
+// reward of arriving at each frame when the buffer keeps rewards. With `terminal_ends`, each
+// episode's last step is terminal (as a task's failure or destination is), else a time limit.
+inline void collect_random(DotEnv& env, ReplayBuffer& replay, int steps, std::uint64_t seed,
+                           bool terminal_ends = false) {
   std::mt19937_64 rng(seed);
   std::uniform_int_distribution<int> pick(0, 8);
   std::vector<std::uint8_t> frame = env.reset();
@@ -68,6 +70,7 @@ inline void collect_random(DotEnv& env, ReplayBuffer& replay, int steps, std::ui
     s.reward = replay.options().has_rewards ? reward : 0.0f;
     reward = env.step(s.action);
     s.is_last = env.done();
+    s.is_terminal = terminal_ends && s.is_last;
     replay.add(0, s);
     first = env.done();
     frame = first ? env.reset() : env.frame();

@@ -292,16 +292,28 @@ TEST(ThreadsTest, TwoThreadsAgreeWithOne) {
 // loss 1 (through a stop-gradient of `enc`'s output), `head` and a leaf `x` (through a slice, a
 // view) by loss 2. Returns every parameter's and the leaf's gradient after one backward of the
 // four losses at once (`parts`) or of their sum.
+// The three models of the tests of several losses, each in the group given (one group may
+// hold all three), and their inputs.
+struct ThreeModels {
+  ThreeModels(ParamGroup& enc_group, ParamGroup& mlp_group, ParamGroup& head_group, Rng& rng)
+      : enc(enc_group, "enc", {.image = 16, .channels = 3, .depth = 4, .min_res = 4}, rng),
+        mlp(mlp_group, "mlp", enc.embed_dim(), {.units = 32, .layers = 2, .out = 4}, rng),
+        head(head_group, "head", 16, 5, {}, rng) {
+    for (float& v : images) v = rng.uniform();
+    for (float& v : xs) v = rng.normal();
+  }
+  ConvEncoder enc;
+  Mlp mlp;
+  Linear head;
+  std::vector<float> images = std::vector<float>(8 * 16 * 16 * 3), xs = std::vector<float>(6 * 16);
+};
+
 std::vector<float> several_losses_grads(bool parts, int threads) {
   set_threads(threads);
   Rng rng(22);
   ParamGroup group("m");
-  ConvEncoder enc(group, "enc", {.image = 16, .channels = 3, .depth = 4, .min_res = 4}, rng);
-  Mlp mlp(group, "mlp", enc.embed_dim(), {.units = 32, .layers = 2, .out = 4}, rng);
-  Linear head(group, "head", 16, 5, {}, rng);
-  std::vector<float> images(8 * 16 * 16 * 3), xs(6 * 16);
-  for (float& v : images) v = rng.uniform();
-  for (float& v : xs) v = rng.normal();
+  ThreeModels models(group, group, group, rng);
+  auto& [enc, mlp, head, images, xs] = models;
   Graph& g = current_graph();
   g.reset();
   const Tensor embed = enc(constant({8, 16, 16, 3}, images));
@@ -361,12 +373,8 @@ TEST(ThreadsTest, AfterEachPartSeesItsGradientsComplete) {
     SCOPED_TRACE(testing::Message() << threads << " threads");
     Rng rng(23);
     ParamGroup enc_group("enc"), mlp_group("mlp"), head_group("head");
-    ConvEncoder enc(enc_group, "enc", {.image = 16, .channels = 3, .depth = 4, .min_res = 4}, rng);
-    Mlp mlp(mlp_group, "mlp", enc.embed_dim(), {.units = 32, .layers = 2, .out = 4}, rng);
-    Linear head(head_group, "head", 16, 5, {}, rng);
-    std::vector<float> images(8 * 16 * 16 * 3), xs(6 * 16);
-    for (float& v : images) v = rng.uniform();
-    for (float& v : xs) v = rng.normal();
+    ThreeModels models(enc_group, mlp_group, head_group, rng);
+    auto& [enc, mlp, head, images, xs] = models;
     // Losses 0 and 3 reach `enc`, 1 `mlp`, 2 `head`, 4 nothing. `parts`: backward of the five at
     // once, else of their sum; returns the final gradients of enc, mlp and head.
     std::vector<std::vector<float>> seen(5);  // in after(i): the gradients of i's part
