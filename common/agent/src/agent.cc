@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
-#include <optional>
 #include <type_traits>
 
 #include "indrive/agent/policy.h"
@@ -183,21 +182,20 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     }
     Tensor target = WorldModel::time_major_column(batch.rewards, b, t);
     const Tensor features = nn::stop_gradient(out.features);
-    Tensor reward = nn::mean(nn::twohot_cross_entropy(wm_->reward_logits(features), target));
-    out.reward = reward.item();
-    // The continuation head on this batch: trained with agent.finetune_cont, else only
-    // measured; either way its mean prediction at the batch's terminal steps is logged (the
-    // frozen head never saw the task's terminal events).
-    Tensor cont_logits;
-    {
-      std::optional<nn::NoGradGuard> frozen;
-      if (!config_.finetune_cont) frozen.emplace();
-      cont_logits = wm_->cont_logits(features);
-    }
+    Tensor loss = nn::mean(nn::twohot_cross_entropy(wm_->reward_logits(features), target));
+    out.reward = loss.item();
+    // The continuation head: trained with agent.finetune_cont (on stop-gradient features, like
+    // the reward head), else frozen as observe() ran it; either way its mean prediction at the
+    // batch's terminal steps is logged (pretraining never showed it the task's terminal events).
     const Tensor is_terminal = WorldModel::time_major_column(batch.is_terminal, b, t);
-    const Tensor cont =
-        nn::mean(nn::bce_with_logits(cont_logits, nn::rsub_scalar(1.0f, is_terminal)));
-    out.cont = cont.item();
+    Tensor cont_logits = out.cont_logits;
+    if (config_.finetune_cont) {
+      cont_logits = wm_->cont_logits(features);
+      const Tensor cont =
+          nn::mean(nn::bce_with_logits(cont_logits, nn::rsub_scalar(1.0f, is_terminal)));
+      out.cont = cont.item();
+      loss = nn::add(loss, nn::scale(cont, config_.world_model.cont_scale));
+    }
     double at_terminal = 0.0;
     int terminals = 0;
     for (std::int64_t i = 0; i < is_terminal.numel(); ++i) {
@@ -206,9 +204,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
       ++terminals;
     }
     if (terminals > 0) metrics.emplace_back("wm/cont_at_terminal", at_terminal / terminals);
-    losses.push_back(config_.finetune_cont
-                         ? nn::add(reward, nn::scale(cont, config_.world_model.cont_scale))
-                         : reward);
+    losses.push_back(loss);
   } else {
     out = wm_->observe(batch, phase == Phase::kDreamer, rng_);
     losses.push_back(out.loss);

@@ -171,8 +171,8 @@ WorldModelOutput WorldModel::observe(const SequenceBatch& batch, bool with_rewar
   Tensor recon = nn::scale(nn::sum(nn::squared_error(decode(out.features), images)),
                            1.0f / static_cast<float>(n));
   Tensor is_terminal = time_major_column(batch.is_terminal, b_size, t_size);
-  Tensor cont =
-      nn::mean(nn::bce_with_logits(cont_logits(out.features), nn::rsub_scalar(1.0f, is_terminal)));
+  out.cont_logits = cont_logits(out.features);
+  Tensor cont = nn::mean(nn::bce_with_logits(out.cont_logits, nn::rsub_scalar(1.0f, is_terminal)));
   Tensor loss =
       nn::add(nn::scale(recon, config_.recon_scale),
               nn::add(nn::add(nn::scale(dyn, config_.kl_dyn), nn::scale(rep, config_.kl_rep)),

@@ -26,11 +26,12 @@ struct RssmState {
 
 // Losses and posterior features of one observed batch.
 struct WorldModelOutput {
-  nn::Tensor loss;        // scalar: recon + dyn * KL_dyn + rep * KL_rep + cont (+ reward)
-  nn::Tensor features;    // (T * B, feat) u_t = [h_t; s_t] of the posterior
-  nn::Tensor post_probs;  // (T * B, stoch * classes) posterior probabilities
-  nn::Tensor deter;       // (T * B, deter)
-  nn::Tensor stoch;       // (T * B, stoch * classes) sampled one-hot posterior latents
+  nn::Tensor loss;         // scalar: recon + dyn * KL_dyn + rep * KL_rep + cont (+ reward)
+  nn::Tensor features;     // (T * B, feat) u_t = [h_t; s_t] of the posterior
+  nn::Tensor post_probs;   // (T * B, stoch * classes) posterior probabilities
+  nn::Tensor deter;        // (T * B, deter)
+  nn::Tensor stoch;        // (T * B, stoch * classes) sampled one-hot posterior latents
+  nn::Tensor cont_logits;  // (T * B, 1) the continuation head's logits on `features`
   float recon = 0, kl = 0, dyn = 0, rep = 0, cont = 0, reward = 0;  // loss terms (means)
 };
 
