@@ -12,33 +12,23 @@
 
 namespace indrive::nn {
 
-float grad_norm(const ParamGroup& group) {
-  // In double, as a vector reduction (Eigen keeps several accumulators; a plain loop is one
-  // serial chain of adds).
-  double total = 0.0;
-  for (const auto& p : group.params()) {
-    const std::span<const float> g = std::as_const(*p).grad();
-    total += detail::ConstArray(g.data(), static_cast<std::int64_t>(g.size()))
-                 .cast<double>()
-                 .square()
-                 .sum();
-  }
-  return static_cast<float>(std::sqrt(total));
-}
-
 namespace {
-float grad_norm(std::span<Parameter* const> params) {
-  double total = 0.0;
-  for (const Parameter* p : params) {
-    const std::span<const float> g = p->grad();
-    total += detail::ConstArray(g.data(), static_cast<std::int64_t>(g.size()))
-                 .cast<double>()
-                 .square()
-                 .sum();
-  }
-  return static_cast<float>(std::sqrt(total));
+// The squared L2 norm of a parameter's gradient, in double, as a vector reduction (Eigen keeps
+// several accumulators; a plain loop is one serial chain of adds).
+double squared_grad_norm(const Parameter& p) {
+  const std::span<const float> g = p.grad();
+  return detail::ConstArray(g.data(), static_cast<std::int64_t>(g.size()))
+      .cast<double>()
+      .square()
+      .sum();
 }
 }  // namespace
+
+float grad_norm(const ParamGroup& group) {
+  double total = 0.0;
+  for (const auto& p : group.params()) total += squared_grad_norm(*p);
+  return static_cast<float>(std::sqrt(total));
+}
 
 Adam::Adam(ParamGroup& group, AdamConfig config, std::string_view prefix)
     : group_(group), group_size_(group.params().size()), config_(config) {
@@ -55,7 +45,9 @@ Adam::Adam(ParamGroup& group, AdamConfig config, std::string_view prefix)
 StepStats Adam::step() {
   INDRIVE_CHECK_EQ(group_size_, group_.params().size()) << "group changed after Adam was created";
   StepStats stats;
-  stats.grad_norm = grad_norm(params_);
+  double squared = 0.0;
+  for (const Parameter* p : params_) squared += squared_grad_norm(*p);
+  stats.grad_norm = static_cast<float>(std::sqrt(squared));
   if (!std::isfinite(stats.grad_norm)) {
     // A numerical fault is counted and skipped, not applied.
     ++skipped_;
