@@ -171,11 +171,13 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   TrainMetrics metrics;
   const int b = batch.batch, t = batch.length;
 
-  // World model: trained in pretrain and dreamer, a frozen feature extractor in finetune.
+  // World model: trained in pretrain and dreamer, a frozen feature extractor in finetune
+  // (unless agent.finetune_world_model trains it there too).
+  const bool train_wm = phase != Phase::kFinetune || config_.finetune_world_model;
   WorldModelOutput out;
   // The update's losses; stop-gradients keep each inside its own part of the model.
   std::vector<Tensor> losses;
-  if (phase == Phase::kFinetune) {
+  if (!train_wm) {
     {
       nn::NoGradGuard frozen;
       out = wm_->observe(batch, false, rng_);
@@ -185,29 +187,33 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     Tensor loss = nn::mean(nn::twohot_cross_entropy(wm_->reward_logits(features), target));
     out.reward = loss.item();
     // The continuation head: trained with agent.finetune_cont (on stop-gradient features, like
-    // the reward head), else frozen as observe() ran it; either way its mean prediction at the
-    // batch's terminal steps is logged (pretraining never showed it the task's terminal events).
-    const Tensor is_terminal = WorldModel::time_major_column(batch.is_terminal, b, t);
-    Tensor cont_logits = out.cont_logits;
+    // the reward head), else frozen as observe() ran it.
     if (config_.finetune_cont) {
-      cont_logits = wm_->cont_logits(features);
+      out.cont_logits = wm_->cont_logits(features);
+      const Tensor is_terminal = WorldModel::time_major_column(batch.is_terminal, b, t);
       const Tensor cont =
-          nn::mean(nn::bce_with_logits(cont_logits, nn::rsub_scalar(1.0f, is_terminal)));
+          nn::mean(nn::bce_with_logits(out.cont_logits, nn::rsub_scalar(1.0f, is_terminal)));
       out.cont = cont.item();
       loss = nn::add(loss, nn::scale(cont, config_.world_model.cont_scale));
     }
+    losses.push_back(loss);
+  } else {
+    out = wm_->observe(batch, task_phase, rng_);
+    losses.push_back(out.loss);
+  }
+  // Few-shot logs the continuation head's mean prediction at the batch's terminal steps
+  // (pretraining never showed it the task's terminal events).
+  if (phase == Phase::kFinetune) {
     double at_terminal = 0.0;
     int terminals = 0;
-    for (std::int64_t i = 0; i < is_terminal.numel(); ++i) {
-      if (is_terminal.data()[i] == 0.0f) continue;
-      at_terminal += 1.0 / (1.0 + std::exp(-static_cast<double>(cont_logits.data()[i])));
+    for (std::size_t i = 0; i < batch.is_terminal.size(); ++i) {
+      // is_terminal is batch-major (sequence i, step j at i * T + j); the logits time-major.
+      if (batch.is_terminal[i] == 0.0f) continue;
+      const std::size_t row = (i % t) * b + i / t;
+      at_terminal += 1.0 / (1.0 + std::exp(-static_cast<double>(out.cont_logits.data()[row])));
       ++terminals;
     }
     if (terminals > 0) metrics.emplace_back("wm/cont_at_terminal", at_terminal / terminals);
-    losses.push_back(loss);
-  } else {
-    out = wm_->observe(batch, phase == Phase::kDreamer, rng_);
-    losses.push_back(out.loss);
   }
   metrics.insert(metrics.end(), {{"wm/recon", out.recon},
                                  {"wm/kl", out.kl},
@@ -284,7 +290,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     graph.backward(total);
   }
   timing_.backward = clock.lap(&flops_.backward);
-  if (phase != Phase::kFinetune) {
+  if (train_wm) {
     const nn::StepStats s = wm_opt_->step();
     metrics.emplace_back("wm/grad_norm", s.grad_norm);
   }
@@ -294,7 +300,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     for (int i = 1; i < static_cast<int>(losses.size()); ++i) step_part(i);
   // Gradients that reached frozen parts (none should) are dropped, never applied later (the
   // optimisers that stepped have zeroed their own).
-  if (phase == Phase::kFinetune) wm_->params().zero_grad();
+  if (!train_wm) wm_->params().zero_grad();
   if (phase != Phase::kPretrain) intrinsic_->params().zero_grad();
   timing_.optimizers = clock.lap(&flops_.optimizers);
   ++train_steps_;

@@ -71,6 +71,13 @@ const std::vector<Key>& keys() {
           [](AgentConfig& c, std::string_view v) {
             c.finetune_cont = parse_bool("finetune_cont", v);
           }},
+      Key{"finetune_world_model",
+          [](const AgentConfig& c) {
+            return std::string(c.finetune_world_model ? "true" : "false");
+          },
+          [](AgentConfig& c, std::string_view v) {
+            c.finetune_world_model = parse_bool("finetune_world_model", v);
+          }},
       INDRIVE_NUMBER_KEY("seed", seed),
       INDRIVE_NUMBER_KEY("world_model.image", world_model.image),
       INDRIVE_NUMBER_KEY("world_model.channels", world_model.channels),
@@ -227,6 +234,9 @@ void validate(const AgentConfig& config) {
   require(b.return_low >= 0.0f && b.return_low < b.return_high && b.return_high <= 1.0f,
           "behavior.return_low < behavior.return_high, both in [0, 1]");
   require(in_unit_interval(b.slow_critic_rate), "behavior.slow_critic_rate must be in (0, 1]");
+  require(!(config.finetune_cont && config.finetune_world_model),
+          "finetune_world_model already trains the continuation head with the rest of the world "
+          "model: set finetune_cont to false");
   const ReplayConfig& r = config.replay;
   require(r.batch >= 1 && r.length >= 2, "replay.batch >= 1 and replay.length >= 2");
   require(r.capacity >= r.length, "replay.capacity must hold at least one sequence");

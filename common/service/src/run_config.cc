@@ -25,7 +25,8 @@ bool is_text_agent_key(const std::string& key) {
                                                   "intrinsic.disag_reward",
                                                   "precision",
                                                   "backward_parts",
-                                                  "finetune_cont"};
+                                                  "finetune_cont",
+                                                  "finetune_world_model"};
   return text_keys.contains(key);
 }
 
@@ -74,6 +75,11 @@ void declare_service_schema(config::Schema& schema) {
                       "few-shot also trains the world model's continuation head (stop-gradient "
                       "features), so imagination learns where task episodes end; the paper keeps "
                       "the world model frozen (an ablation, docs/architecture.md section 9)");
+    } else if (key == "finetune_world_model") {
+      schema.add_bool(name, text == "true",
+                      "few-shot also trains the whole world model on the task's replay, from the "
+                      "pretrained weights; the paper keeps it frozen (an ablation, "
+                      "docs/architecture.md section 9; excludes finetune_cont)");
     } else {
       double value = 0.0;
       std::from_chars(text.data(), text.data() + text.size(), value);

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <string>
+
 namespace indrive::agent {
 namespace {
 
@@ -39,6 +41,24 @@ TEST(AgentConfig, DefaultsAreThePapersValues) {
   EXPECT_FLOAT_EQ(c.world_model.unimix, 0.01f);
   EXPECT_EQ(c.replay.capacity, 100000);
   EXPECT_EQ(c.replay.prefill, 1000);
+}
+
+// The two few-shot ablations overlap (the whole world model includes the continuation head),
+// so a config that sets both is refused with a message that says which to unset.
+TEST(AgentConfig, FinetuneWorldModelExcludesFinetuneCont) {
+  AgentConfig c = preset("tiny");
+  EXPECT_FALSE(c.finetune_world_model);
+  set_config_value(c, "finetune_world_model", "true");
+  EXPECT_TRUE(c.finetune_world_model);
+  EXPECT_NO_THROW(validate(c));
+  c.finetune_cont = true;
+  try {
+    validate(c);
+    FAIL() << "both few-shot ablations accepted";
+  } catch (const AgentConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("set finetune_cont to false"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(AgentConfig, KeysRoundTripThroughText) {

@@ -187,6 +187,34 @@ TEST(Agent, FinetuneContTrainsOnlyTheContinuationHead) {
   }
 }
 
+// agent.finetune_world_model: few-shot trains the whole world model on the task's replay (its
+// reconstruction falls), the continuation head with it, and the intrinsic module stays frozen;
+// the terminal-step diagnostic is logged either way.
+TEST(Agent, FinetuneWorldModelTrainsTheWholeModel) {
+  nn::set_threads(1);
+  ReplayBuffer replay = dot_replay_with_terminals();
+  const SequenceBatch batch = replay.sample(4, 10);
+  AgentConfig config = tiny_config(Phase::kFinetune);
+  config.finetune_world_model = true;
+  config.world_model.lr = 1e-3f;
+  Agent agent(config);
+  const auto body = values_named(agent.world_model().params(), false);
+  const auto head = values_named(agent.world_model().params(), true);
+  const auto intrinsic = values_of(agent.intrinsic().params());
+  std::vector<float> recon;
+  for (int i = 0; i < 30; ++i) {
+    const TrainMetrics m = agent.train_step(batch);
+    recon.push_back(metric(m, "wm/recon"));
+    const float at_terminal = metric(m, "wm/cont_at_terminal");
+    EXPECT_TRUE(at_terminal > 0.0f && at_terminal < 1.0f) << at_terminal;
+    EXPECT_GT(metric(m, "wm/grad_norm"), 0.0f);
+  }
+  EXPECT_NE(values_named(agent.world_model().params(), false), body);
+  EXPECT_NE(values_named(agent.world_model().params(), true), head);
+  EXPECT_EQ(values_of(agent.intrinsic().params()), intrinsic);
+  EXPECT_LT(recon.back(), 0.7f * recon.front()) << recon.front() << " -> " << recon.back();
+}
+
 // The continuation head's optimiser state travels in the checkpoint as a last section; a
 // checkpoint written before it existed (without that section) still loads, the optimiser fresh.
 TEST(Agent, CheckpointsWithoutTheContinuationOptimiserStillLoad) {

@@ -155,6 +155,12 @@ struct AgentConfig {
   // and the project's contract keep the whole world model frozen (false); an ablation
   // (docs/architecture.md section 9).
   bool finetune_cont = false;
+  // Few-shot also trains the whole world model (representation, dynamics, decoder and heads)
+  // on the task's replay, as DreamerV3 from scratch does, from the pretrained weights; the paper
+  // and the project's contract keep it frozen (false). An ablation of whether the frozen
+  // model's pretraining coverage limits few-shot (docs/architecture.md section 9). Includes the
+  // continuation head, so it excludes finetune_cont.
+  bool finetune_world_model = false;
   std::uint64_t seed = 0;
 };
 
