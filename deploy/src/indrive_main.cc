@@ -320,10 +320,8 @@ int main(int argc, char** argv) {
     indrive::log::set_level(indrive::log::parse_level(log_level));
     if (*launch_cmd) {
       launch.bin_dir = indrive::own_program_folder();
-      // The learner and the actors share the cores: spinning OpenMP threads would take them
-      // from each other (the service benchmark measured a 17x slower learner on 2 cores).
-      // Set before the children start, as OpenMP reads it once at load; a user's value wins.
-      ::setenv("OMP_WAIT_POLICY", "passive", /*overwrite=*/0);
+      // Before the children start: OpenMP reads these once, when a process loads it.
+      indrive::deploy::set_openmp_wait_defaults();
       return indrive::deploy::run_launch(launch);
     }
     if (*dashboard_cmd) {

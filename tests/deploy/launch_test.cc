@@ -3,14 +3,43 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <utility>
 
 #include "child_process.h"
 #include "testing.h"
 
 namespace indrive::deploy {
 namespace {
+
+// How the children's idle OpenMP threads wait: passive after a short spin, unless the user's
+// environment says otherwise (read once by each child when it loads OpenMP).
+TEST(LaunchPlan, OpenMpWaitDefaultsLeaveTheUsersValues) {
+  const auto value = [](const char* name) {
+    const char* v = std::getenv(name);
+    return v ? std::string(v) : std::string("(unset)");
+  };
+  const std::string policy = value("OMP_WAIT_POLICY"), spin = value("GOMP_SPINCOUNT");
+  ::unsetenv("OMP_WAIT_POLICY");
+  ::unsetenv("GOMP_SPINCOUNT");
+  set_openmp_wait_defaults();
+  EXPECT_EQ(value("OMP_WAIT_POLICY"), "passive");
+  EXPECT_EQ(value("GOMP_SPINCOUNT"), "10000");
+  ::setenv("OMP_WAIT_POLICY", "active", 1);
+  ::setenv("GOMP_SPINCOUNT", "0", 1);
+  set_openmp_wait_defaults();
+  EXPECT_EQ(value("OMP_WAIT_POLICY"), "active");
+  EXPECT_EQ(value("GOMP_SPINCOUNT"), "0");
+  for (const auto& [name, old] : {std::pair{"OMP_WAIT_POLICY", policy}, {"GOMP_SPINCOUNT", spin}}) {
+    if (old == "(unset)")
+      ::unsetenv(name);
+    else
+      ::setenv(name, old.c_str(), 1);
+  }
+}
 
 TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
   testing::TempDir dir;

@@ -15,8 +15,8 @@
 //   build/bin/learner_service_bench --presets cpu --cpu-modes async,limited --actors 1
 // A full run takes about 5 minutes on a quiet 2-core host (11 on a heavily loaded one): each
 // scenario starts fresh processes, waits for training (and, rate-limited, for the learner to
-// catch up with the prefill), then measures. Children get OMP_WAIT_POLICY=passive unless the
-// environment sets it, as `indrive launch` does.
+// catch up with the prefill), then measures. Children get OMP_WAIT_POLICY=passive and
+// GOMP_SPINCOUNT=10000 unless the environment sets them, as `indrive launch` does.
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -44,6 +44,7 @@
 #include "child_process.h"
 #include "indrive/agent/agent_config.h"
 #include "indrive/dds/participant.h"
+#include "indrive/deploy/launch.h"
 #include "indrive/msg/policyPubSubTypes.h"
 #include "testing.h"
 
@@ -524,9 +525,10 @@ int main(int argc, char** argv) {
 
   // The children get the profile by flag; an inherited default would make them refuse it.
   ::unsetenv(indrive::dds::kProfilesEnvVar);
-  // As `indrive launch` does: idle OpenMP threads sleep instead of spinning on cores the other
-  // processes need. OMP_WAIT_POLICY=active in the environment measures the difference.
-  ::setenv("OMP_WAIT_POLICY", "passive", /*overwrite=*/0);
+  // As `indrive launch` does: idle OpenMP threads sleep, after a short spin, instead of spinning
+  // on cores the other processes need. OMP_WAIT_POLICY=active or GOMP_SPINCOUNT=0 in the
+  // environment measures the difference.
+  indrive::deploy::set_openmp_wait_defaults();
   std::vector<Scenario> scenarios;
   auto wanted = [&](const std::string& preset, const char* mode) {
     const auto& modes = preset == "cpu" ? options.cpu_modes : options.modes;

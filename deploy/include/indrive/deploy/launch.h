@@ -39,6 +39,13 @@ void write_status_json(const std::filesystem::path& run_dir,
 // evaluators restarted at most 5 times. Output of each goes to <run>/logs/<name>.log too.
 std::vector<ProcessSpec> launch_plan(const LaunchOptions& options);
 
+// Sets, for the children started afterwards, how idle OpenMP threads wait, unless the
+// environment already says: OMP_WAIT_POLICY=passive (the processes share the cores; spinning
+// threads would take them from each other) and GOMP_SPINCOUNT=10000 (libgomp spins that many
+// iterations before sleeping, so an update's back-to-back parallel regions do not each wake
+// threads through the kernel). OpenMP reads both once, when a process loads it.
+void set_openmp_wait_defaults();
+
 // Runs the plan until the learner ends or SIGINT/SIGTERM arrives, then stops everything.
 // Meanwhile refreshes the run's page every dashboard_interval_s (the coverage map redrawn, the
 // page reloading itself) and writes it a last time when the run has ended; prints its path.
