@@ -171,8 +171,9 @@ std::vector<ProcessSpec> launch_plan(const LaunchOptions& options) {
 
 void set_openmp_wait_defaults() {
   // Spinning threads measured a 17x slower learner on 2 cores beside its actors (the service
-  // benchmark). Threads that sleep at once make the tiny update with 2 threads take 0.048-0.058 s;
-  // a 10k-iteration spin first, 0.042-0.043 s (libgomp's default spin is 300k, passive's 0).
+  // benchmark). Sleeping at once costs an update's many parallel regions a wake-up each: the tiny
+  // update with 2 threads took 0.046-0.058 s so and 0.042-0.053 s with a 10k-iteration spin first
+  // (libgomp's default spin is 300k, passive's 0), in alternating runs on a noisy 2-core machine.
   ::setenv("OMP_WAIT_POLICY", "passive", /*overwrite=*/0);
   ::setenv("GOMP_SPINCOUNT", "10000", /*overwrite=*/0);
 }
