@@ -207,9 +207,9 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     double at_terminal = 0.0;
     int terminals = 0;
     for (std::size_t i = 0; i < batch.is_terminal.size(); ++i) {
-      // is_terminal is batch-major (sequence i, step j at i * T + j); the logits time-major.
+      // is_terminal is batch-major, the logits time-major.
       if (batch.is_terminal[i] == 0.0f) continue;
-      const std::size_t row = (i % t) * b + i / t;
+      const std::size_t row = WorldModel::time_major_row(i, b, t);
       at_terminal += 1.0 / (1.0 + std::exp(-static_cast<double>(out.cont_logits.data()[row])));
       ++terminals;
     }

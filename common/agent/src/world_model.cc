@@ -106,8 +106,8 @@ Tensor WorldModel::batch_images(const SequenceBatch& batch) {
 Tensor WorldModel::time_major_column(const std::vector<float>& field, int batch, int length) {
   INDRIVE_CHECK_EQ(field.size(), static_cast<std::size_t>(batch) * length);
   Tensor out = nn::empty(Shape{static_cast<std::int64_t>(batch) * length, 1});
-  for (int t = 0; t < length; ++t) {
-    for (int b = 0; b < batch; ++b) out.data()[t * batch + b] = field[b * length + t];
+  for (std::size_t i = 0; i < field.size(); ++i) {
+    out.data()[time_major_row(i, batch, length)] = field[i];
   }
   return out;
 }

@@ -24,6 +24,26 @@ ReplayBuffer dot_replay(int steps, bool rewards = false) {
   return replay;
 }
 
+// A (B, T) field is batch-major (step t of sequence b at b * T + t); the model's rows are
+// time-major (t * B + b). Written out for B = 3, T = 4, and the column built from it.
+TEST(WorldModel, TimeMajorRowsOfABatchMajorField) {
+  EXPECT_EQ(WorldModel::time_major_row(0, 3, 4), 0u);    // b 0, t 0
+  EXPECT_EQ(WorldModel::time_major_row(1, 3, 4), 3u);    // b 0, t 1
+  EXPECT_EQ(WorldModel::time_major_row(3, 3, 4), 9u);    // b 0, t 3
+  EXPECT_EQ(WorldModel::time_major_row(4, 3, 4), 1u);    // b 1, t 0
+  EXPECT_EQ(WorldModel::time_major_row(6, 3, 4), 7u);    // b 1, t 2
+  EXPECT_EQ(WorldModel::time_major_row(11, 3, 4), 11u);  // b 2, t 3
+  std::vector<float> field(12);
+  for (int b = 0; b < 3; ++b) {
+    for (int t = 0; t < 4; ++t) field[b * 4 + t] = 10.0f * b + t;
+  }
+  const nn::Tensor column = WorldModel::time_major_column(field, 3, 4);
+  ASSERT_EQ(column.numel(), 12);
+  for (int t = 0; t < 4; ++t) {
+    for (int b = 0; b < 3; ++b) EXPECT_EQ(column.data()[t * 3 + b], 10.0f * b + t);
+  }
+}
+
 TEST(WorldModel, ShapesAndFiniteLoss) {
   nn::Rng rng(1);
   WorldModel wm(tiny_model(), rng);

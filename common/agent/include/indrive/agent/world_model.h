@@ -10,6 +10,7 @@
 //   nn::current_graph().backward(out.loss);
 #pragma once
 
+#include <cstddef>
 #include <vector>
 
 #include "indrive/agent/agent_config.h"
@@ -81,6 +82,12 @@ class WorldModel {
 
   // Converts a batch's frames to a time-major (T * B, H, W, 3) RGB tensor in [0, 1].
   static nn::Tensor batch_images(const SequenceBatch& batch);
+  // The time-major row (step t of sequence b at t * batch + b) of a batch-major index of a
+  // (B, T) field (step t of sequence b at b * length + t).
+  static std::size_t time_major_row(std::size_t index, int batch, int length) {
+    const auto b = static_cast<std::size_t>(batch), t = static_cast<std::size_t>(length);
+    return (index % t) * b + index / t;
+  }
   // A time-major (T * B, 1) column of a (B, T) field such as is_first.
   static nn::Tensor time_major_column(const std::vector<float>& field, int batch, int length);
   // Time-major (T * B, 9) one-hot of the actions taken at each step (actions is (B, T)).
