@@ -66,7 +66,8 @@ EnvAdapter::EnvAdapter(env::Env& env, EnvAdapterOptions options)
 
 EnvAdapterOptions EnvAdapter::options_from(const service::ServiceConfig& config) {
   const auto& c = config.config();
-  return {.route = c.get<std::string>("env.route"),
+  return {.town = c.get<std::string>("env.town"),
+          .route = c.get<std::string>("env.route"),
           .densities = c.get<std::vector<double>>("env.densities"),
           .density_period_steps = c.get<std::int64_t>("env.density_period_steps"),
           .seed = static_cast<std::uint64_t>(c.get<std::int64_t>("run.seed"))};
@@ -75,7 +76,9 @@ EnvAdapterOptions EnvAdapter::options_from(const service::ServiceConfig& config)
 agent::EnvStep EnvAdapter::convert(const env::StepResult& result) {
   last_ = result;
   ++frames_;
+  episode_.episode_return += result.reward.value_or(0.0);
   if (observer_) observer_(result);
+  if (result.is_last && episode_observer_) episode_observer_(training_record(episode_, result));
   agent::EnvStep step;
   step.frame.assign(result.observation.data, result.observation.data + result.observation.total());
   step.reward = static_cast<float>(result.reward.value_or(0.0));
@@ -93,10 +96,18 @@ agent::EnvStep EnvAdapter::reset() {
   const std::uint64_t traffic_seed = rng_() % 1000000u;
   const std::uint64_t spawn_seed = rng_() % 1000000u;
   const std::string route = draw_route(routes_, rng_);
-  return convert(env_.reset({.route = route,
-                             .density = density_,
-                             .traffic_seed = traffic_seed,
-                             .spawn_seed = spawn_seed}));
+  env::StepResult first = env_.reset({.route = route,
+                                      .density = density_,
+                                      .traffic_seed = traffic_seed,
+                                      .spawn_seed = spawn_seed});
+  const env::Route* driven = env_.route();
+  episode_ = {.town = options_.town,
+              .route = route,
+              .density = density_,
+              .traffic_seed = static_cast<int>(traffic_seed),
+              .spawn_seed = static_cast<int>(spawn_seed),
+              .route_length_m = driven == nullptr ? 0.0 : driven->length_m()};
+  return convert(first);
 }
 
 agent::EnvStep EnvAdapter::step(int action) {

@@ -131,9 +131,7 @@ struct Evaluator::Impl {
           }
           policy = make_snapshot_policy(agent_config, file.blob, head, name);
         }
-        method = agent_config.phase == agent::Phase::kDreamer
-                     ? "dreamer"
-                     : std::string(agent::to_string(agent_config.intrinsic.method));
+        method = agent::method_label(agent_config);
         break;
     }
     task = head == PolicyHead::kExploration ? "exploration" : agent_config.task;

@@ -65,4 +65,29 @@ EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int
   record.episode_return = episode_return;
   return record;
 }
+
+EpisodeRecord training_record(const TrainingEpisode& episode, const env::StepResult& last) {
+  EpisodeRecord record;
+  record.eval_kind = "training";
+  record.town = episode.town;
+  record.route = episode.route;
+  record.density = episode.density;
+  record.traffic_seed = episode.traffic_seed;
+  record.spawn_seed = episode.spawn_seed;
+  record.steps = static_cast<int>(last.step);
+  record.episode_return = episode.episode_return;
+  std::uint32_t failures = last.events & env::kFailureEvents;
+  if (episode.route.empty()) {
+    failures &= ~env::kTimeLimit;
+    record.success = failures == 0;
+  } else {
+    record.success = (last.events & env::kDestination) != 0 && failures == 0;
+    record.route_completion =
+        episode.route_length_m > 0.0
+            ? route_completion(last.route_progress_m, episode.route_length_m, last.events)
+            : 0.0;
+  }
+  record.failure_reason = failures == 0 ? "" : env::event_names(failures);
+  return record;
+}
 }  // namespace indrive::actor

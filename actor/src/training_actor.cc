@@ -7,6 +7,7 @@
 
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/protocol_record.h"
 #include "indrive/actor/rejoin.h"
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/agent/policy.h"
@@ -302,23 +303,25 @@ struct TrainingActor::Impl {
     result.phase(config.wire_phase());
     result.policy_version(stats.policy_version);
     result.town(env_config.town);
-    result.route(route);
-    result.density(static_cast<std::uint32_t>(density));
-    result.traffic_seed(static_cast<std::uint32_t>(traffic_seed));
-    result.spawn_seed(static_cast<std::uint32_t>(spawn_seed));
-    // Without a route, an episode succeeds when it ends by the time limit alone.
-    const std::uint32_t failures = route.empty()
-                                       ? (last.events & env::kFailureEvents & ~env::kTimeLimit)
-                                       : (last.events & env::kFailureEvents);
-    result.success(route.empty() ? failures == 0 : (last.events & env::kDestination) != 0);
-    result.failure_reason(failures == 0 ? "" : env::event_names(failures));
-    result.steps(static_cast<std::uint32_t>(last.step));
     const env::Route* driven = env->route();
-    result.route_completion(
-        driven == nullptr || driven->length_m() <= 0.0
-            ? 0.0f
-            : static_cast<float>(std::min(1.0, last.route_progress_m / driven->length_m())));
-    result.episode_return(static_cast<float>(episode_return));
+    const EpisodeRecord record =
+        training_record({.town = env_config.town,
+                         .route = route,
+                         .density = density,
+                         .traffic_seed = static_cast<int>(traffic_seed),
+                         .spawn_seed = static_cast<int>(spawn_seed),
+                         .route_length_m = driven == nullptr ? 0.0 : driven->length_m(),
+                         .episode_return = episode_return},
+                        last);
+    result.route(record.route);
+    result.density(static_cast<std::uint32_t>(record.density));
+    result.traffic_seed(static_cast<std::uint32_t>(record.traffic_seed));
+    result.spawn_seed(static_cast<std::uint32_t>(record.spawn_seed));
+    result.success(record.success);
+    result.failure_reason(record.failure_reason);
+    result.steps(static_cast<std::uint32_t>(record.steps));
+    result.route_completion(static_cast<float>(record.route_completion));
+    result.episode_return(static_cast<float>(record.episode_return));
     result.reach_segments(static_cast<std::uint32_t>(reach));
     dds::seal(result);
     result_writer->write(result);

@@ -23,6 +23,7 @@
 #include "indrive/deploy/launch.h"
 #include "indrive/deploy/plot.h"
 #include "indrive/deploy/report.h"
+#include "indrive/deploy/training_episodes.h"
 #include "indrive/envserver/town.h"
 
 namespace fs = std::filesystem;
@@ -221,6 +222,19 @@ int main(int argc, char** argv) {
                                                      indrive::env::kRouteSets.end())))
       ->capture_default_str();
 
+  std::vector<fs::path> episodes_inputs;
+  int episodes_last = 5;
+  auto* episodes_cmd = app.add_subcommand(
+      "episodes",
+      "how training went per route, from runs' train-episodes.csv: episodes, SR, route "
+      "completion and return per route, over all episodes and the newest --last, and the "
+      "return balanced over routes");
+  episodes_cmd->add_option("runs", episodes_inputs, "run directories or train-episodes.csv files")
+      ->required();
+  episodes_cmd->add_option("--last", episodes_last, "newest episodes per route behind last-N")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+
   fs::path plot_run;
   std::string plot_x = "env_steps";
   auto* plot_cmd = app.add_subcommand(
@@ -398,6 +412,16 @@ int main(int argc, char** argv) {
           "%s: %s", untrained_out.c_str(),
           indrive::actor::describe_snapshot_file(indrive::actor::read_snapshot_file(untrained_out))
               .c_str());
+      return 0;
+    }
+    if (*episodes_cmd) {
+      std::vector<indrive::deploy::RunTraining> runs;
+      for (const fs::path& input : episodes_inputs) {
+        runs.push_back(indrive::deploy::summarize_training(
+            indrive::deploy::load_training_episodes(input), episodes_last));
+        runs.back().label = input.string();
+      }
+      std::fputs(indrive::deploy::render_training(runs, episodes_last).c_str(), stdout);
       return 0;
     }
     if (*report_cmd) {

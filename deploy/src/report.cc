@@ -587,15 +587,26 @@ std::vector<EpisodeRecord> load_results(const std::vector<fs::path>& inputs) {
     files.insert(files.end(), found.begin(), found.end());
   }
   std::vector<EpisodeRecord> records;
+  std::size_t training = 0;
   for (const auto& file : files) {
-    auto part = read_episode_csv(file);
-    records.insert(records.end(), part.begin(), part.end());
+    // Training episodes (train-episodes.csv) are no evaluation: `indrive episodes` reads them.
+    for (EpisodeRecord& record : read_episode_csv(file)) {
+      if (record.eval_kind == "training") {
+        ++training;
+      } else {
+        records.push_back(std::move(record));
+      }
+    }
   }
   if (records.empty()) {
     std::string message = "no episode results found in";
     for (const auto& input : inputs) {
       message += ' ';
       message += input.string();
+    }
+    if (training > 0) {
+      message += " (only " + std::to_string(training) +
+                 " training episodes, which `indrive episodes` summarises)";
     }
     message += "; run an evaluation first (indrive-actor --evaluate writes <run>/eval/*.csv)";
     throw CsvError(message);

@@ -10,6 +10,7 @@
 
 #include "indrive/agent/agent.h"
 #include "indrive/basics/check.h"
+#include "indrive/basics/episode_csv.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
 #include "indrive/dds/participant.h"
@@ -205,6 +206,39 @@ struct Learner::Impl {
     ++interval_episodes;
     interval_successes += result.success() ? 1 : 0;
     episode_stats.add(result.steps(), result.reach_segments());
+    write_training_episode(result);
+  }
+
+  // One row of train-episodes.csv per training actor's finished episode (under results_mutex).
+  // A failure to write is logged once and does not stop training.
+  void write_training_episode(const msg::EpisodeResult& result) {
+    try {
+      if (!train_episodes) train_episodes.emplace(run.train_episodes_path());
+      EpisodeRecord row;
+      row.run_id = result.run_id();
+      row.method = agent::method_label(agent_config);
+      row.eval_kind = "training";
+      row.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
+      row.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
+      row.policy_version = static_cast<long long>(result.policy_version());
+      row.town = result.town();
+      row.route = result.route();
+      row.density = static_cast<int>(result.density());
+      row.traffic_seed = static_cast<int>(result.traffic_seed());
+      row.spawn_seed = static_cast<int>(result.spawn_seed());
+      row.episode = static_cast<int>(train_episodes->rows());
+      row.success = result.success();
+      row.failure_reason = result.failure_reason();
+      row.steps = static_cast<int>(result.steps());
+      row.route_completion = result.route_completion();
+      row.episode_return = result.episode_return();
+      train_episodes->write(row);
+    } catch (const std::exception& error) {
+      if (!train_episodes_failed) {
+        INDRIVE_LOG(kError, "learner") << "training episodes are not recorded: " << error.what();
+      }
+      train_episodes_failed = true;
+    }
   }
 
   // Moves queued chunks into replay; returns whether there were any.
@@ -531,6 +565,8 @@ struct Learner::Impl {
   std::mutex results_mutex;
   std::uint64_t interval_episodes = 0, interval_successes = 0;  // under results_mutex
   EpisodeStats episode_stats;                                   // under results_mutex
+  std::optional<EpisodeCsvWriter> train_episodes;  // train-episodes.csv, under results_mutex
+  bool train_episodes_failed = false;              // under results_mutex
   agent::TrainMetrics last_metrics;
   LearnerStats stats;
   std::function<void(const std::string&)> progress;

@@ -116,6 +116,44 @@ TEST(EnvAdapterTest, TaskPhaseCarriesTheEnvReward) {
   EXPECT_NE(total, 0.0);
 }
 
+// Each finished episode reaches on_episode once, after its last result, with the town, the
+// route drawn for it and the sum of its rewards.
+TEST(EnvAdapterTest, EachFinishedEpisodeIsRecordedWithItsRouteAndReturn) {
+  env::Env env(small_env("lane_following"));
+  EnvAdapter adapter(env,
+                     {.town = "town01", .route = "straight,two_turn", .densities = {0}, .seed = 2});
+  std::vector<EpisodeRecord> records;
+  adapter.on_episode([&](const EpisodeRecord& record) { records.push_back(record); });
+  double total = 0.0;
+  std::vector<double> returns;
+  std::vector<std::string> routes;
+  agent::EnvStep step = adapter.reset();
+  routes.push_back(env.route()->name());
+  for (int i = 0; i < 200; ++i) {
+    if (step.is_last) {
+      returns.push_back(total);
+      total = 0.0;
+      step = adapter.reset();
+      routes.push_back(env.route()->name());
+    } else {
+      step = adapter.step(i % 3 == 0 ? 1 : 4);
+      total += step.reward;
+    }
+  }
+  ASSERT_GE(records.size(), 3u);  // the 40-step limit ends them
+  ASSERT_EQ(records.size(), returns.size());
+  for (std::size_t i = 0; i < records.size(); ++i) {
+    EXPECT_EQ(records[i].eval_kind, "training");
+    EXPECT_EQ(records[i].town, "town01");
+    EXPECT_EQ(records[i].route, routes[i]);
+    EXPECT_NEAR(records[i].episode_return, returns[i], 1e-3);
+    EXPECT_GT(records[i].steps, 0);
+    EXPECT_LE(records[i].steps, 40);
+    EXPECT_FALSE(records[i].success);
+    EXPECT_FALSE(records[i].failure_reason.empty());
+  }
+}
+
 TEST(EnvAdapterTest, RejectsUnusableOptions) {
   env::Env env(small_env(""));
   EXPECT_THROW(EnvAdapter(env, {.densities = {}}), std::invalid_argument);

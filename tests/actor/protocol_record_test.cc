@@ -90,6 +90,53 @@ TEST(ProtocolRecord, ProtocolRecordSucceedsOnlyAtTheDestinationWithoutFailures) 
   EXPECT_EQ(strayed.failure_reason, "off_route");
 }
 
+// A training episode's row: on a route the protocol's verdict and completion; without one
+// (pretraining) the time limit alone is a success and completion is 0.
+TEST(ProtocolRecord, TrainingRecordJudgesRoutesAsTheProtocolAndFreeDrivingByFailures) {
+  TrainingEpisode episode{.town = "town01",
+                          .route = "right_loop",
+                          .density = 5,
+                          .traffic_seed = 123,
+                          .spawn_seed = 456,
+                          .route_length_m = 400.0,
+                          .episode_return = 12.5};
+  env::StepResult last;
+  last.step = 640;
+  last.route_progress_m = 390.0;
+  last.events = env::kDestination;
+  const EpisodeRecord reached = training_record(episode, last);
+  EXPECT_EQ(reached.eval_kind, "training");
+  EXPECT_EQ(reached.town, "town01");
+  EXPECT_EQ(reached.route, "right_loop");
+  EXPECT_EQ(reached.density, 5);
+  EXPECT_EQ(reached.traffic_seed, 123);
+  EXPECT_EQ(reached.spawn_seed, 456);
+  EXPECT_EQ(reached.steps, 640);
+  EXPECT_TRUE(reached.success);
+  EXPECT_EQ(reached.failure_reason, "");
+  EXPECT_DOUBLE_EQ(reached.route_completion, 1.0);  // whole at the destination
+  EXPECT_DOUBLE_EQ(reached.episode_return, 12.5);
+  last.events = env::kOffRoute;
+  last.route_progress_m = 100.0;
+  const EpisodeRecord strayed = training_record(episode, last);
+  EXPECT_FALSE(strayed.success);
+  EXPECT_EQ(strayed.failure_reason, "off_route");
+  EXPECT_DOUBLE_EQ(strayed.route_completion, 0.25);
+  last.events = env::kTimeLimit;
+  EXPECT_FALSE(training_record(episode, last).success) << "a route's time limit is a failure";
+  EXPECT_EQ(training_record(episode, last).failure_reason, "time_limit");
+
+  episode.route.clear();
+  episode.route_length_m = 0.0;
+  const EpisodeRecord free_drive = training_record(episode, last);
+  EXPECT_TRUE(free_drive.success) << "without a route the time limit ends a good episode";
+  EXPECT_EQ(free_drive.failure_reason, "");
+  EXPECT_DOUBLE_EQ(free_drive.route_completion, 0.0);
+  last.events = env::kTimeLimit | env::kCollision;
+  EXPECT_FALSE(training_record(episode, last).success);
+  EXPECT_EQ(training_record(episode, last).failure_reason, "collision");
+}
+
 // The grid's route names must mean what they say: `indrive-env routes` once printed "2 turns"
 // for `straight`, counting the junctions it crosses; it crosses them without turning.
 TEST(ProtocolRecord, BuiltInStraightRoutesCrossJunctionsWithoutTurning) {

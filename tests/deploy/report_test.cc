@@ -257,6 +257,33 @@ TEST(Report, EmptyInputsAreClearErrors) {
   }
 }
 
+// Training episodes (train-episodes.csv, eval_kind "training") are no evaluation: a report
+// over a file that holds them leaves them out, and one with nothing else says where they go.
+TEST(Report, TrainingEpisodesAreLeftOutOfTheTables) {
+  testing::TempDir dir;
+  std::vector<EpisodeRecord> records;
+  add_episodes(records, "disag", 0, "town01", "straight", 10, 3, 2);
+  EpisodeRecord training = records.front();
+  training.eval_kind = "training";
+  const auto file = dir.path() / "mixed.csv";
+  {
+    EpisodeCsvWriter writer(file);
+    for (const auto& r : records) writer.write(r);
+    writer.write(training);
+  }
+  EXPECT_EQ(load_results({file}).size(), 3u);
+  const auto only = dir.path() / "train-episodes.csv";
+  { EpisodeCsvWriter(only).write(training); }
+  try {
+    load_results({only});
+    FAIL();
+  } catch (const CsvError& error) {
+    EXPECT_NE(std::string(error.what()).find("only 1 training episodes, which `indrive episodes`"),
+              std::string::npos)
+        << error.what();
+  }
+}
+
 TEST(Report, LearningCurveFilesAreLeftOutOfTheTables) {
   testing::TempDir dir;
   std::filesystem::create_directories(dir.path() / "eval");

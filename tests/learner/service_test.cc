@@ -15,6 +15,7 @@
 
 #include "child_process.h"
 #include "indrive/actor/chunk_builder.h"
+#include "indrive/basics/episode_csv.h"
 #include "indrive/dds/participant.h"
 #include "testing.h"
 
@@ -285,6 +286,17 @@ TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExi
   EXPECT_GE(metrics["episode_reach_last20"].get<double>(), 1.0) << metrics.dump();
   EXPECT_GT(metrics["episode_length_last20"].get<double>(), 0.0) << metrics.dump();
   EXPECT_LE(metrics["episode_length_last20"].get<double>(), 151.0) << metrics.dump();
+  // ... and each is a row of the learner's train-episodes.csv.
+  const auto episodes = read_episode_csv(run_dir_ / "train-episodes.csv");
+  ASSERT_GE(episodes.size(), 2u);
+  for (std::size_t i = 0; i < episodes.size(); ++i) {
+    EXPECT_EQ(episodes[i].episode, static_cast<int>(i));
+    EXPECT_EQ(episodes[i].eval_kind, "training");
+    EXPECT_EQ(episodes[i].task, "exploration");
+    EXPECT_EQ(episodes[i].town, "town01");
+    EXPECT_GT(episodes[i].steps, 0);
+    EXPECT_LE(episodes[i].steps, 151);
+  }
 
   // A learner started without `indrive launch` keeps the run's page (learner.dashboard_s, 30 s
   // by default) and ends it with how the run ended.

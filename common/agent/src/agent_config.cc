@@ -254,6 +254,11 @@ std::string_view to_string(Phase phase) {
   return "?";
 }
 
+std::string method_label(const AgentConfig& config) {
+  return config.phase == Phase::kDreamer ? "dreamer"
+                                         : std::string(to_string(config.intrinsic.method));
+}
+
 std::string_view to_string(Method method) {
   switch (method) {
     case Method::kDisag:

@@ -1,6 +1,8 @@
 #include "indrive/basics/episode_csv.h"
 
+#include <algorithm>
 #include <charconv>
+#include <iterator>
 #include <sstream>
 
 namespace indrive {
@@ -65,8 +67,21 @@ const std::string& episode_csv_header() {
 
 EpisodeCsvWriter::EpisodeCsvWriter(const std::filesystem::path& path) : path_(path) {
   std::error_code error;
-  const bool fresh =
+  bool fresh =
       !std::filesystem::exists(path, error) || std::filesystem::file_size(path, error) == 0;
+  if (!fresh) {
+    std::ifstream in(path, std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (!in.eof() && in.fail()) throw CsvError("cannot read " + path.string());
+    const std::size_t complete = text.rfind('\n') == std::string::npos ? 0 : text.rfind('\n') + 1;
+    if (complete < text.size()) {  // a row cut by a crash: drop it
+      std::filesystem::resize_file(path, complete, error);
+      if (error) throw CsvError("cannot cut the partial last row of " + path.string());
+    }
+    const auto lines = std::count(text.begin(), text.begin() + static_cast<long>(complete), '\n');
+    rows_ = std::max<long long>(0, lines - 1);  // less the header
+    fresh = complete == 0;
+  }
   out_.open(path, std::ios::app);
   if (!out_) throw CsvError("cannot open " + path.string() + " for appending");
   if (fresh) out_ << episode_csv_header() << '\n' << std::flush;
@@ -82,6 +97,7 @@ void EpisodeCsvWriter::write(const EpisodeRecord& r) {
       << r.steps << ',' << r.route_completion << ',' << r.episode_return;
   out_ << row.str() << '\n' << std::flush;
   if (!out_) throw CsvError("cannot append to " + path_.string() + " (disk full?)");
+  ++rows_;
 }
 
 std::vector<EpisodeRecord> read_episode_csv(const std::filesystem::path& path) {

@@ -5,6 +5,7 @@
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "indrive/actor/env_adapter.h"
@@ -91,8 +92,11 @@ learner::LearnerCounters read_checkpoint(const fs::path& path,
 class LazyEnvironment : public agent::Environment {
  public:
   LazyEnvironment(const service::ServiceConfig& config,
-                  std::function<void(const env::StepResult&)> observer)
-      : config_(config), observer_(std::move(observer)) {}
+                  std::function<void(const env::StepResult&)> observer,
+                  std::function<void(const EpisodeRecord&)> episode_observer)
+      : config_(config),
+        observer_(std::move(observer)),
+        episode_observer_(std::move(episode_observer)) {}
 
   agent::EnvStep reset() override {
     if (!adapter_) {
@@ -100,6 +104,7 @@ class LazyEnvironment : public agent::Environment {
       adapter_ =
           std::make_unique<actor::EnvAdapter>(*env_, actor::EnvAdapter::options_from(config_));
       adapter_->on_result(observer_);
+      adapter_->on_episode(episode_observer_);
     }
     return adapter_->reset();
   }
@@ -108,14 +113,14 @@ class LazyEnvironment : public agent::Environment {
  private:
   const service::ServiceConfig& config_;
   std::function<void(const env::StepResult&)> observer_;
+  std::function<void(const EpisodeRecord&)> episode_observer_;
   std::unique_ptr<env::Env> env_;
   std::unique_ptr<actor::EnvAdapter> adapter_;
 };
 
 std::string method_name(const service::ServiceConfig& config, const agent::AgentConfig& agent) {
   if (config.config().get<bool>("local.random")) return "random";
-  if (agent.phase == agent::Phase::kDreamer) return "dreamer";
-  return std::string(agent::to_string(agent.intrinsic.method));
+  return agent::method_label(agent);
 }
 
 }  // namespace
@@ -130,11 +135,13 @@ struct LocalRun::Impl {
         town(env::load_town(actor::env_config(service).town,
                             actor::env_config(service).town_options)),
         coverage(town.net, {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
-        environment(service,
-                    [this](const env::StepResult& result) {
-                      if (result.is_first) close_episode();
-                      coverage.observe(result.ego.pose);
-                    }),
+        environment(
+            service,
+            [this](const env::StepResult& result) {
+              if (result.is_first) close_episode();
+              coverage.observe(result.ego.pose);
+            },
+            [this](const EpisodeRecord& record) { write_training_episode(record); }),
         trainer(agent_config, environment,
                 {.train_ratio = service.config().get<double>("learner.replay_ratio"),
                  .snapshot_every = service.config().get<int>("learner.snapshot_every")}),
@@ -278,6 +285,21 @@ struct LocalRun::Impl {
     logged_episodes = counters.episodes;
   }
 
+  // One row of train-episodes.csv per finished training episode (a resumed run keeps the rows
+  // of the episodes after its last checkpoint, as metrics.jsonl keeps their lines).
+  void write_training_episode(EpisodeRecord record) {
+    record.run_id = config.run_id();
+    record.method = method_name(config, agent_config);
+    record.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
+    record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
+    record.policy_version = updates();
+    // Opened at the first episode (a run that only reloads or reports writes none); a resumed
+    // run numbers its episodes on from the rows there.
+    if (!train_episodes) train_episodes.emplace(run.train_episodes_path());
+    record.episode = static_cast<int>(train_episodes->rows());
+    train_episodes->write(record);
+  }
+
   // Closes the coverage tracker's episode (the steps observed since the last reset) and counts
   // its length and reach for metrics.jsonl.
   void close_episode() {
@@ -340,6 +362,7 @@ struct LocalRun::Impl {
   Clock::time_point last_checkpoint{};
   service::MetricsInterval interval;  // since the last metrics line
   std::int64_t logged_episodes = 0;
+  std::optional<EpisodeCsvWriter> train_episodes;  // train-episodes.csv
 };
 
 LocalRun::LocalRun(const service::ServiceConfig& config) : impl_(std::make_unique<Impl>(config)) {}

@@ -48,6 +48,31 @@ TEST(EpisodeCsv, RoundTripsRecordsIncludingQuotedFields) {
   EXPECT_DOUBLE_EQ(records[1].route_completion, 0.5);
 }
 
+// A crash while a row was written leaves a partial last line; opening the file again cuts it
+// off, so the rows appended after it stay readable, and rows() counts the complete ones.
+TEST(EpisodeCsv, AWriterCutsARowLeftPartialByACrashAndCountsTheRows) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "train-episodes.csv";
+  {
+    EpisodeCsvWriter writer(path);
+    EXPECT_EQ(writer.rows(), 0);
+    writer.write(sample(0, true));
+    writer.write(sample(1, false));
+    EXPECT_EQ(writer.rows(), 2);
+  }
+  { std::ofstream(path, std::ios::app) << "disag-s0,disag,zero_sh"; }  // the crash
+  {
+    EpisodeCsvWriter writer(path);
+    EXPECT_EQ(writer.rows(), 2);
+    writer.write(sample(2, true));
+    EXPECT_EQ(writer.rows(), 3);
+  }
+  const auto records = read_episode_csv(path);
+  ASSERT_EQ(records.size(), 3u);
+  EXPECT_EQ(records[2].episode, 2);
+  EXPECT_EQ(EpisodeCsvWriter(path).rows(), 3);
+}
+
 TEST(EpisodeCsv, APartialRowOrWrongHeaderIsAClearError) {
   testing::TempDir dir;
   const auto path = dir.path() / "eval.csv";

@@ -26,6 +26,7 @@
 #include <opencv2/videoio.hpp>
 #include <sstream>
 
+#include "indrive/basics/episode_csv.h"
 #include "indrive/basics/run_dir.h"
 #include "testing.h"
 
@@ -208,6 +209,16 @@ TEST(LocalRunSmokeTest, PretrainWithDisagResumesAndFinetunesLaneFollowing) {
       EXPECT_GE(lines[i]["env_steps"].get<std::int64_t>(),
                 lines[i - 1]["env_steps"].get<std::int64_t>());
     }
+    // Every training episode of both sessions is a row of train-episodes.csv, numbered on
+    // across the resume.
+    const auto episodes = read_episode_csv(pre_dir / "train-episodes.csv");
+    ASSERT_GE(episodes.size(), 2u);
+    for (std::size_t i = 0; i < episodes.size(); ++i) {
+      EXPECT_EQ(episodes[i].episode, static_cast<int>(i));
+      EXPECT_EQ(episodes[i].method, "disag");
+      EXPECT_EQ(episodes[i].eval_kind, "training");
+      EXPECT_EQ(episodes[i].task, "exploration");
+    }
   }
 
   // Finetune lane following on the straight route from the newest disag checkpoint.
@@ -233,6 +244,16 @@ TEST(LocalRunSmokeTest, PretrainWithDisagResumesAndFinetunesLaneFollowing) {
   expect_all_finite(lines);
   expect_falls(lines, "wm/reward");
   EXPECT_FALSE(column(lines, "task/critic_loss").empty());
+  // The task's episodes are recorded with their route, verdict and return.
+  const auto episodes = read_episode_csv(ft_dir / "train-episodes.csv");
+  ASSERT_FALSE(episodes.empty());
+  for (const EpisodeRecord& e : episodes) {
+    EXPECT_EQ(e.task, "lane_following");
+    EXPECT_EQ(e.route, "straight");
+    EXPECT_EQ(e.success, e.failure_reason.empty()) << e.failure_reason;
+    EXPECT_GE(e.route_completion, 0.0);
+    EXPECT_LE(e.route_completion, 1.0);
+  }
 }
 
 // Metrics lines come at each multiple of learner.log_every_env_steps as well as by time, so a
@@ -278,6 +299,21 @@ TEST(LocalRunTest, ARunLogsAMetricsLineEveryLogStepsEvenWhenFast) {
   mean /= static_cast<double>(reach.size() - from);
   const auto last = read_metrics(dir.path() / "random").back();
   EXPECT_NEAR(last.value("episode_reach_last20", -1.0), mean, 1e-9) << last.dump();
+
+  // Each finished training episode is a row of train-episodes.csv: free driving (no route),
+  // its steps within the run's.
+  const auto episodes = read_episode_csv(dir.path() / "random" / "train-episodes.csv");
+  ASSERT_GE(episodes.size(), reach.size());
+  ASSERT_LE(episodes.size(), reach.size() + 1);
+  int recorded = 0;
+  for (const EpisodeRecord& e : episodes) {
+    EXPECT_EQ(e.method, "random");
+    EXPECT_EQ(e.eval_kind, "training");
+    EXPECT_EQ(e.route, "");
+    EXPECT_GT(e.steps, 0);
+    recorded += e.steps;
+  }
+  EXPECT_LE(recorded, 700);
 }
 
 // One column of a CSV file with a header row, by name (cells hold no commas here).

@@ -7,6 +7,7 @@
 //   env::Env env(env_config(service));
 //   EnvAdapter adapter(env, EnvAdapter::options_from(service));
 //   adapter.on_result([&](const env::StepResult& r) { coverage.observe(r.ego.pose); });
+//   adapter.on_episode([&](const EpisodeRecord& e) { csv.write(e); });  // each finished one
 //   LocalTrainer trainer(service.agent(), adapter);
 #pragma once
 
@@ -16,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "indrive/actor/protocol_record.h"
 #include "indrive/agent/local_trainer.h"
 #include "indrive/envserver/env.h"
 #include "indrive/service/run_config.h"
@@ -40,6 +42,7 @@ std::string draw_route(const std::vector<std::string>& routes, std::mt19937_64& 
 
 // Episode choices of the adapter.
 struct EnvAdapterOptions {
+  std::string town;   // env.town, as finished episodes name it
   std::string route;  // env.route: empty (random spawns), one route or a comma-separated list
   std::vector<double> densities = {10};  // drawn uniformly every density_period_steps
   std::int64_t density_period_steps = 10000;
@@ -65,6 +68,11 @@ class EnvAdapter : public agent::Environment {
   void on_result(std::function<void(const env::StepResult&)> observer) {
     observer_ = std::move(observer);
   }
+  // Calls `observer` with each finished episode's record (training_record: the verdict, route
+  // completion and return; the caller adds the run-level fields), after on_result's call.
+  void on_episode(std::function<void(const EpisodeRecord&)> observer) {
+    episode_observer_ = std::move(observer);
+  }
   // The env result of the last reset or step.
   const env::StepResult& last() const { return last_; }
   // Frames returned so far (resets and steps), the unit of the density period.
@@ -79,6 +87,8 @@ class EnvAdapter : public agent::Environment {
   std::vector<std::string> routes_;
   std::mt19937_64 rng_;
   std::function<void(const env::StepResult&)> observer_;
+  std::function<void(const EpisodeRecord&)> episode_observer_;
+  TrainingEpisode episode_;  // the running episode's choices and return
   env::StepResult last_;
   std::int64_t frames_ = 0;
   std::int64_t next_density_draw_ = 0;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "indrive/actor/protocol.h"
 #include "indrive/basics/episode_csv.h"
@@ -36,5 +37,23 @@ env::EnvConfig protocol_env_config(env::EnvConfig config);
 // `events`: EventBit bits of the last step (kTimeLimit included when the budget ran out).
 EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int steps,
                               double route_completion, double episode_return);
+
+// What a training episode (a training actor's or the local trainer's) drew, and its return.
+struct TrainingEpisode {
+  std::string town;
+  std::string route;  // empty: random spawns (pretraining)
+  int density = 0;
+  int traffic_seed = 0;
+  int spawn_seed = 0;
+  double route_length_m = 0.0;  // the route's length; 0 without a route
+  double episode_return = 0.0;  // the task reward summed over its steps (0 in pretraining)
+};
+
+// A finished training episode as a CSV row, eval_kind "training", without the run-level fields
+// (run id, method, task, seed, policy version, episode index). On a route the verdict and the
+// route completion are the protocol's (success: the destination with no failure event); without
+// a route an episode succeeds when nothing but the time limit ended it, and its completion is 0.
+// `last`: the episode's last env result.
+EpisodeRecord training_record(const TrainingEpisode& episode, const env::StepResult& last);
 
 }  // namespace indrive::actor

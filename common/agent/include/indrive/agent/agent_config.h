@@ -184,6 +184,9 @@ void validate(const AgentConfig& config);
 std::string_view to_string(Phase phase);
 std::string_view to_string(Method method);
 std::string_view to_string(DisagReward reward);
+// The method a run trains, as results files name it: "dreamer" in the DreamerV3 phase (no
+// intrinsic module), else the intrinsic module's name (disag, icm, rnd).
+std::string method_label(const AgentConfig& config);
 // Parses the text names; throw AgentConfigError listing the valid names.
 Phase parse_phase(std::string_view text);
 Method parse_method(std::string_view text);

@@ -43,15 +43,20 @@ class CsvError : public std::runtime_error {
 const std::string& episode_csv_header();
 
 // Appends records to a CSV file, writing the header first if the file is new or empty.
-// Each row is flushed, so a crash loses at most the row being written.
+// Each row is flushed, so a crash loses at most the row being written; a partial last line
+// that such a crash left is cut off when the file is opened again, so that the rows appended
+// after it stay readable.
 class EpisodeCsvWriter {
  public:
   explicit EpisodeCsvWriter(const std::filesystem::path& path);
   void write(const EpisodeRecord& record);
+  // Data rows in the file: those it held when opened and those written since.
+  long long rows() const { return rows_; }
 
  private:
   std::filesystem::path path_;
   std::ofstream out_;
+  long long rows_ = 0;
 };
 
 // Reads every record of one file. Throws CsvError for a wrong header, a wrong number of

@@ -3,7 +3,8 @@
 //   runs/<run_id>/config.yaml      fully resolved configuration
 //   runs/<run_id>/checkpoints/     atomic writes, newest N kept
 //   runs/<run_id>/metrics.jsonl    one JSON object per log interval
-//   runs/<run_id>/eval/*.csv       one row per episode
+//   runs/<run_id>/eval/*.csv       one row per evaluated episode
+//   runs/<run_id>/train-episodes.csv   one row per finished training episode (same columns)
 //   runs/<run_id>/report.md, plots/*.png, videos/*.mp4
 //
 //   RunDir run = RunDir::open_or_create("runs", "pretrain-disag-s0");
@@ -53,6 +54,7 @@ class RunDir {
   std::filesystem::path metrics_path() const { return path_ / "metrics.jsonl"; }
   std::filesystem::path checkpoints() const { return path_ / "checkpoints"; }
   std::filesystem::path eval() const { return path_ / "eval"; }
+  std::filesystem::path train_episodes_path() const { return path_ / "train-episodes.csv"; }
   std::filesystem::path plots() const { return path_ / "plots"; }
   std::filesystem::path videos() const { return path_ / "videos"; }
   std::filesystem::path report_path() const { return path_ / "report.md"; }
