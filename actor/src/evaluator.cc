@@ -306,21 +306,12 @@ struct Evaluator::Impl {
   void publish(const EpisodeRecord& record, std::uint64_t version) {
     if (!result_writer) return;
     msg::EpisodeResult result;
+    dds::set_episode_fields(result, record);
     result.run_id(config.run_id());
+    result.policy_version(version);
     result.sender_role(msg::ROLE_EVALUATOR);
     result.sender_id(static_cast<std::uint32_t>(index));
     result.phase(msg::PHASE_EVALUATION);
-    result.policy_version(version);
-    result.town(record.town);
-    result.route(record.route);
-    result.density(static_cast<std::uint32_t>(record.density));
-    result.traffic_seed(static_cast<std::uint32_t>(record.traffic_seed));
-    result.spawn_seed(static_cast<std::uint32_t>(record.spawn_seed));
-    result.success(record.success);
-    result.failure_reason(record.failure_reason);
-    result.steps(static_cast<std::uint32_t>(record.steps));
-    result.route_completion(static_cast<float>(record.route_completion));
-    result.episode_return(static_cast<float>(record.episode_return));
     dds::seal(result);
     result_writer->write(result);
   }

@@ -297,14 +297,8 @@ struct TrainingActor::Impl {
 
   void publish_result(const env::StepResult& last, double episode_return, int reach) {
     msg::EpisodeResult result;
-    result.run_id(config.run_id());
-    result.sender_role(msg::ROLE_ACTOR);
-    result.sender_id(id);
-    result.phase(config.wire_phase());
-    result.policy_version(stats.policy_version);
-    result.town(env_config.town);
     const env::Route* driven = env->route();
-    const EpisodeRecord record =
+    EpisodeRecord record =
         training_record({.town = env_config.town,
                          .route = route,
                          .density = density,
@@ -313,15 +307,12 @@ struct TrainingActor::Impl {
                          .route_length_m = driven == nullptr ? 0.0 : driven->length_m(),
                          .episode_return = episode_return},
                         last);
-    result.route(record.route);
-    result.density(static_cast<std::uint32_t>(record.density));
-    result.traffic_seed(static_cast<std::uint32_t>(record.traffic_seed));
-    result.spawn_seed(static_cast<std::uint32_t>(record.spawn_seed));
-    result.success(record.success);
-    result.failure_reason(record.failure_reason);
-    result.steps(static_cast<std::uint32_t>(record.steps));
-    result.route_completion(static_cast<float>(record.route_completion));
-    result.episode_return(static_cast<float>(record.episode_return));
+    record.run_id = config.run_id();
+    record.policy_version = static_cast<long long>(stats.policy_version);
+    dds::set_episode_fields(result, record);
+    result.sender_role(msg::ROLE_ACTOR);
+    result.sender_id(id);
+    result.phase(config.wire_phase());
     result.reach_segments(static_cast<std::uint32_t>(reach));
     dds::seal(result);
     result_writer->write(result);

@@ -214,24 +214,12 @@ struct Learner::Impl {
   void write_training_episode(const msg::EpisodeResult& result) {
     try {
       if (!train_episodes) train_episodes.emplace(run.train_episodes_path());
-      EpisodeRecord row;
-      row.run_id = result.run_id();
+      EpisodeRecord row = dds::episode_fields(result);
       row.method = agent::method_label(agent_config);
       row.eval_kind = "training";
       row.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
       row.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
-      row.policy_version = static_cast<long long>(result.policy_version());
-      row.town = result.town();
-      row.route = result.route();
-      row.density = static_cast<int>(result.density());
-      row.traffic_seed = static_cast<int>(result.traffic_seed());
-      row.spawn_seed = static_cast<int>(result.spawn_seed());
       row.episode = static_cast<int>(train_episodes->rows());
-      row.success = result.success();
-      row.failure_reason = result.failure_reason();
-      row.steps = static_cast<int>(result.steps());
-      row.route_completion = result.route_completion();
-      row.episode_return = result.episode_return();
       train_episodes->write(row);
     } catch (const std::exception& error) {
       if (!train_episodes_failed) {

@@ -187,6 +187,38 @@ msg::SnapshotAnnounce announce_for(const msg::PolicySnapshot& snapshot) {
   return announce;
 }
 
+void set_episode_fields(msg::EpisodeResult& result, const EpisodeRecord& record) {
+  result.run_id(record.run_id);
+  result.policy_version(static_cast<std::uint64_t>(record.policy_version));
+  result.town(record.town);
+  result.route(record.route);
+  result.density(static_cast<std::uint32_t>(record.density));
+  result.traffic_seed(static_cast<std::uint32_t>(record.traffic_seed));
+  result.spawn_seed(static_cast<std::uint32_t>(record.spawn_seed));
+  result.success(record.success);
+  result.failure_reason(record.failure_reason);
+  result.steps(static_cast<std::uint32_t>(record.steps));
+  result.route_completion(static_cast<float>(record.route_completion));
+  result.episode_return(static_cast<float>(record.episode_return));
+}
+
+EpisodeRecord episode_fields(const msg::EpisodeResult& result) {
+  EpisodeRecord record;
+  record.run_id = result.run_id();
+  record.policy_version = static_cast<long long>(result.policy_version());
+  record.town = result.town();
+  record.route = result.route();
+  record.density = static_cast<int>(result.density());
+  record.traffic_seed = static_cast<int>(result.traffic_seed());
+  record.spawn_seed = static_cast<int>(result.spawn_seed());
+  record.success = result.success();
+  record.failure_reason = result.failure_reason();
+  record.steps = static_cast<int>(result.steps());
+  record.route_completion = result.route_completion();
+  record.episode_return = result.episode_return();
+  return record;
+}
+
 DropReason validate(const msg::TrajectoryChunk& chunk, std::string_view expected_run_id) {
   if (auto header = check_header(chunk.schema_version(), chunk.run_id(), expected_run_id);
       header != DropReason::kOk) {

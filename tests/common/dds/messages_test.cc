@@ -97,6 +97,47 @@ TEST(DdsMessages, AnnounceDescribesItsSnapshot) {
   EXPECT_EQ(announce.size_bytes(), 4096u);
 }
 
+// A results row on the wire and back: every shared field arrives (the float fields at float
+// precision), the sender's and reader's own fields are left to them.
+TEST(DdsMessages, EpisodeFieldsRoundTripThroughAnEpisodeResult) {
+  const EpisodeRecord row{.run_id = "lf-s1",
+                          .method = "disag",
+                          .eval_kind = "training",
+                          .task = "lane_following",
+                          .train_seed = 1,
+                          .policy_version = 4096,
+                          .town = "town01",
+                          .route = "left_loop",
+                          .density = 20,
+                          .traffic_seed = 987654,
+                          .spawn_seed = 123456,
+                          .episode = 7,
+                          .success = false,
+                          .failure_reason = "off_route",
+                          .steps = 812,
+                          .route_completion = 0.25,
+                          .episode_return = -12.5};
+  msg::EpisodeResult result;
+  set_episode_fields(result, row);
+  EXPECT_EQ(result.sender_role(), msg::EpisodeResult().sender_role());
+  const EpisodeRecord back = episode_fields(result);
+  EXPECT_EQ(back.run_id, "lf-s1");
+  EXPECT_EQ(back.policy_version, 4096);
+  EXPECT_EQ(back.town, "town01");
+  EXPECT_EQ(back.route, "left_loop");
+  EXPECT_EQ(back.density, 20);
+  EXPECT_EQ(back.traffic_seed, 987654);
+  EXPECT_EQ(back.spawn_seed, 123456);
+  EXPECT_FALSE(back.success);
+  EXPECT_EQ(back.failure_reason, "off_route");
+  EXPECT_EQ(back.steps, 812);
+  EXPECT_DOUBLE_EQ(back.route_completion, 0.25);
+  EXPECT_DOUBLE_EQ(back.episode_return, -12.5);
+  EXPECT_EQ(back.method, "");
+  EXPECT_EQ(back.eval_kind, "");
+  EXPECT_EQ(back.episode, 0);
+}
+
 TEST(DdsMessages, SmallMessagesCheckHeaderAndRanges) {
   msg::EpisodeResult result;
   result.run_id("r");

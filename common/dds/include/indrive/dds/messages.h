@@ -23,6 +23,7 @@
 #include <string_view>
 #include <vector>
 
+#include "indrive/basics/episode_csv.h"
 #include "indrive/msg/common.h"
 #include "indrive/msg/control.h"
 #include "indrive/msg/controlPubSubTypes.h"
@@ -93,6 +94,13 @@ void seal(msg::Heartbeat& heartbeat);
 // The sealed announcement of `snapshot` (run, version, checksum, params size), which the
 // learner repeats so that late joiners notice a snapshot they missed.
 msg::SnapshotAnnounce announce_for(const msg::PolicySnapshot& snapshot);
+
+// An episode's verdict on the wire and in a results row: the fields the two share (run id,
+// policy version, town, route, density, seeds, success, failure reason, steps, route completion,
+// return). The sender, phase and reach are the writer's to set, the run-level columns (method,
+// eval kind, task, training seed, episode index) the reader's; nothing is sealed.
+void set_episode_fields(msg::EpisodeResult& result, const EpisodeRecord& record);
+EpisodeRecord episode_fields(const msg::EpisodeResult& result);
 
 // Checks schema version, run id, shape and checksum, in that order, and returns the first
 // failure. An empty expected_run_id accepts any run (for tools that watch every run).
