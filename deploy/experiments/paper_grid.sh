@@ -229,8 +229,8 @@ PY
     ;;
   publish)
     # Copies what must outlast the machine into a results page (--page DIR, committed): each
-    # finished training run's metrics.jsonl and config.yaml (paths made relative to the
-    # repository) under runs/s<seed>-<run>/, each finished evaluation's CSVs under
+    # finished training run's metrics.jsonl, config.yaml (paths made relative to the
+    # repository) and train-episodes.csv (where its build wrote one) under runs/s<seed>-<run>/, each finished evaluation's CSVs under
     # eval/s<seed>-<evaluation>-evaluator-<j>.csv, the acting part of the final snapshot of every
     # run of the seeds in --snapshot-seeds under snapshots/ (1.5 MB each on tiny), the pretraining
     # summary, and `indrive report` over eval/. Runs and evaluations not finished (no DONE) are
@@ -244,6 +244,7 @@ PY
       if ! done_mark "$run"; then say "not finished, left out: $run"; continue; fi
       mkdir -p "$page/runs/$name"
       cp "$run/metrics.jsonl" "$page/runs/$name/"
+      [[ -f $run/train-episodes.csv ]] && cp "$run/train-episodes.csv" "$page/runs/$name/"
       # machine paths made relative: the root as a literal string, whatever characters it holds
       ROOT="$root/" perl -pe 's/\Q$ENV{ROOT}\E//g' "$run/config.yaml" > "$page/runs/$name/config.yaml"
       # (a random-action run's snapshot is an untrained model: the random policy is no file)

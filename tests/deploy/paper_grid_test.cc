@@ -8,6 +8,7 @@
 #include "child_process.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
+#include "indrive/basics/episode_csv.h"
 #include "indrive/nn/serialize.h"
 #include "testing.h"
 
@@ -44,6 +45,8 @@ void write_finished_run(const fs::path& dir, agent::Agent& agent,
   const nn::ParamGroup* whole[] = {&agent.world_model().params(),
                                    &agent.exploration().actor_params()};
   actor::write_snapshot_file(dir / "snapshot.params", nn::save_params(whole), config);
+  EpisodeCsvWriter(dir / "train-episodes.csv")
+      .write({.run_id = "pretrain-disag", .eval_kind = "training", .steps = 150});
   write_text(dir / "DONE", "");
 }
 
@@ -70,6 +73,8 @@ TEST(PaperGridPublish, CopiesFinishedRunsAndEvaluationsAndLeavesOutTheRest) {
 
   EXPECT_EQ(testing::slurp(page / "runs/s0-pretrain-disag/metrics.jsonl"),
             testing::slurp(out / "s0/pretrain-disag/metrics.jsonl"));
+  EXPECT_EQ(testing::slurp(page / "runs/s0-pretrain-disag/train-episodes.csv"),
+            testing::slurp(out / "s0/pretrain-disag/train-episodes.csv"));
   const std::string config = testing::slurp(page / "runs/s0-pretrain-disag/config.yaml");
   EXPECT_EQ(config.find(kSource.string()), std::string::npos) << config;
   EXPECT_NE(config.find("dir: runs/paper-grid/s0/pretrain-disag"), std::string::npos) << config;
