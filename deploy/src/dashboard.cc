@@ -19,6 +19,7 @@
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
 #include "indrive/deploy/report.h"
+#include "indrive/deploy/training_episodes.h"
 #include "indrive/envserver/town.h"
 
 namespace indrive::deploy {
@@ -671,6 +672,26 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
         route_set.empty() ? TownChoices{} : route_choices_of(report, route_set), route_set));
   } catch (const CsvError&) {  // load_results: no episode in any eval/*.csv yet
     html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
+  }
+  html << "</section>\n";
+
+  // Training episodes per route (train-episodes.csv), newest 5 of each route.
+  constexpr int kLastEpisodes = 5;
+  std::vector<RunTraining> trained;
+  for (const fs::path& run : all_runs) {
+    if (!fs::is_regular_file(run / "train-episodes.csv")) continue;
+    try {
+      trained.push_back(summarize_training(load_training_episodes(run), kLastEpisodes));
+      trained.back().label = run.filename().string();
+    } catch (const std::exception&) {  // no finished episode yet, or a file being written
+    }
+  }
+  html << "<section id=\"training\"><h2>Training per route</h2>\n";
+  if (trained.empty()) {
+    html << "<p class=\"note\">no finished training episodes yet (the runs' "
+            "train-episodes.csv)</p>\n";
+  } else {
+    html << markdown_to_html(render_training(trained, kLastEpisodes));
   }
   html << "</section>\n";
 

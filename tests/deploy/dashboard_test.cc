@@ -48,6 +48,11 @@ fs::path write_run(const fs::path& dir, int lines, double slope) {
       << "run,disag,zero_shot,exploration,0,7,town02,straight,5,101,11,0,1,,59,1.0,0\n"
       << "run,disag,zero_shot,exploration,0,7,town02,straight,5,101,12,1,0,lane_invasion,40,0.3,"
          "0\n";
+  std::ofstream(dir / "train-episodes.csv")
+      << episode_csv_header() << "\n"
+      << "run,disag,training,lane_following,0,3,town01,straight,10,5,6,0,1,,250,1.0,240.5\n"
+      << "run,disag,training,lane_following,0,4,town01,right_loop,10,5,6,1,0,off_route,90,0.2,"
+         "30.5\n";
   std::ofstream(dir / "status.json")
       << R"({"written":"2026-12-03 01:00:00","state":"ended","processes":[)"
       << R"({"name":"learner","state":"exited","pid":12,"restarts":1,"last_exit_code":0,)"
@@ -151,6 +156,11 @@ TEST(Dashboard, OneRunsPageHoldsEveryMetricLineTablesMapsVideoConfigAndProcesses
   EXPECT_NE(html.find("<th>straight SR</th>"), std::string::npos);
   EXPECT_NE(html.find("<td>50.0 ["), std::string::npos);
   EXPECT_NE(html.find("<th>lane_invasion</th>"), std::string::npos);
+  // Training per route, from train-episodes.csv.
+  EXPECT_NE(html.find("<h2>Training per route</h2>"), std::string::npos);
+  EXPECT_NE(html.find("<td>right_loop</td><td>1</td><td>0%</td><td>20%</td><td>30.5</td>"),
+            std::string::npos)
+      << html.substr(html.find("Training per route"), 1500);
   // Coverage map as a data URI, the video as a WebM beside the page.
   EXPECT_NE(html.find("src=\"data:image/png;base64,"), std::string::npos);
   EXPECT_NE(html.find("src=\"media/run-eval-town02-straight.webm\""), std::string::npos);
