@@ -217,7 +217,7 @@ struct Learner::Impl {
       EpisodeRecord row = dds::episode_fields(result);
       row.method = agent::method_label(agent_config);
       row.eval_kind = "training";
-      row.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
+      row.task = agent::task_label(agent_config);
       row.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
       row.episode = static_cast<int>(train_episodes->rows());
       train_episodes->write(row);

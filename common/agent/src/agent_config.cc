@@ -259,6 +259,10 @@ std::string method_label(const AgentConfig& config) {
                                          : std::string(to_string(config.intrinsic.method));
 }
 
+std::string task_label(const AgentConfig& config) {
+  return config.phase == Phase::kPretrain ? "exploration" : config.task;
+}
+
 std::string_view to_string(Method method) {
   switch (method) {
     case Method::kDisag:

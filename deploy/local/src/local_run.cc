@@ -290,7 +290,7 @@ struct LocalRun::Impl {
   void write_training_episode(EpisodeRecord record) {
     record.run_id = config.run_id();
     record.method = method_name(config, agent_config);
-    record.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
+    record.task = agent::task_label(agent_config);
     record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
     record.policy_version = updates();
     // Opened at the first episode (a run that only reloads or reports writes none); a resumed
@@ -438,7 +438,7 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
     record.run_id = config.run_id();
     record.method = method_name(config, agent_config);
     record.eval_kind = agent_config.phase == agent::Phase::kPretrain ? "zero_shot" : "few_shot";
-    record.task = agent_config.phase == agent::Phase::kPretrain ? "exploration" : agent_config.task;
+    record.task = agent::task_label(agent_config);
     record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
     record.policy_version = version;
     csv.write(record);

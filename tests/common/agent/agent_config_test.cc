@@ -45,6 +45,22 @@ TEST(AgentConfig, DefaultsAreThePapersValues) {
 
 // The two few-shot ablations overlap (the whole world model includes the continuation head),
 // so a config that sets both is refused with a message that says which to unset.
+// The names results files give a run's method and task.
+TEST(AgentConfig, MethodAndTaskLabelsAsResultsFilesWriteThem) {
+  AgentConfig config = preset("tiny");
+  config.phase = Phase::kPretrain;
+  config.intrinsic.method = Method::kIcm;
+  config.task = "lane_following";
+  EXPECT_EQ(method_label(config), "icm");
+  EXPECT_EQ(task_label(config), "exploration");
+  config.phase = Phase::kFinetune;
+  EXPECT_EQ(task_label(config), "lane_following");
+  config.phase = Phase::kDreamer;
+  config.task = "collision_avoidance";
+  EXPECT_EQ(method_label(config), "dreamer");
+  EXPECT_EQ(task_label(config), "collision_avoidance");
+}
+
 TEST(AgentConfig, FinetuneWorldModelExcludesFinetuneCont) {
   AgentConfig c = preset("tiny");
   EXPECT_FALSE(c.finetune_world_model);

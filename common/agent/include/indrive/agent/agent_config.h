@@ -187,6 +187,9 @@ std::string_view to_string(DisagReward reward);
 // The method a run trains, as results files name it: "dreamer" in the DreamerV3 phase (no
 // intrinsic module), else the intrinsic module's name (disag, icm, rnd).
 std::string method_label(const AgentConfig& config);
+// The task a run's policy serves, as results files name it: "exploration" in pretraining, else
+// the task (lane_following, collision_avoidance).
+std::string task_label(const AgentConfig& config);
 // Parses the text names; throw AgentConfigError listing the valid names.
 Phase parse_phase(std::string_view text);
 Method parse_method(std::string_view text);
