@@ -136,8 +136,10 @@ ProcessWatch::ProcessWatch(int domain_id, const fs::path& profiles_file)
     : ProcessWatch(dds::ParticipantOptions{.domain_id = domain_id,
                                            .profiles_file = profiles_file.string()}) {}
 
-ProcessWatch::ProcessWatch(const dds::ParticipantOptions& options) {
-  participant_ = std::make_unique<dds::Participant>(options);
+ProcessWatch::ProcessWatch(const dds::ParticipantOptions& options) : options_(options) { open(); }
+
+void ProcessWatch::open() {
+  participant_ = std::make_unique<dds::Participant>(options_);
   chunk_reader_ =
       participant_->make_reader<msg::TrajectoryChunk>([this](const msg::TrajectoryChunk& chunk) {
         if (chunk.actor_id() >= 100) return;  // a test's own injected chunks
@@ -173,11 +175,21 @@ ProcessWatch::ProcessWatch(const dds::ParticipantOptions& options) {
   });
 }
 
-ProcessWatch::~ProcessWatch() {
+ProcessWatch::~ProcessWatch() { close(); }
+
+void ProcessWatch::close() {
   chunk_reader_.reset();
   snapshot_reader_.reset();
   heartbeat_reader_.reset();
   participant_.reset();
+}
+
+bool ProcessWatch::replace_if_stalled() {
+  if (participant_->peers().stalled == 0) return false;
+  close();
+  open();
+  ++replacements_;
+  return true;
 }
 
 std::vector<SeenChunk> ProcessWatch::chunks() {

@@ -99,8 +99,21 @@ class ProcessWatch {
   std::uint64_t min_newest_chunk_version(const std::vector<std::uint32_t>& actors);
   double now_s() const { return seconds_since(start_); }
   dds::Participant& participant() { return *participant_; }
+  // With DDS Security, a handshake of this watch's participant pending for
+  // dds::Participant::kHandshakeStallS never completes (seen in the two-host security test on
+  // 2026-12-05: the watch never authenticated one actor, so none of its chunks arrived), where a
+  // new participant's does, as the service's actors replace theirs. Replaces the participant and
+  // its readers when one of its handshakes has stalled; what was seen is kept. Returns whether
+  // it did. Call it while waiting.
+  bool replace_if_stalled();
+  int replacements() const { return replacements_; }
 
  private:
+  void open();
+  void close();
+
+  dds::ParticipantOptions options_;
+  int replacements_ = 0;
   SteadyClock::time_point start_ = SteadyClock::now();
   std::unique_ptr<dds::Participant> participant_;
   std::unique_ptr<dds::Reader<msg::TrajectoryChunk>> chunk_reader_;

@@ -249,8 +249,8 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   {
     nn::NoGradGuard no_grad;
     if (task_phase) {
-      Tensor r = nn::twohot_mean(wm_->reward_logits(traj.next_features()));
-      rewards.assign(r.values().begin(), r.values().end());
+      rewards = row_values(traj.next_features(),
+                           [&](Tensor u) { return nn::twohot_mean(wm_->reward_logits(u)); });
     } else {
       rewards = intrinsic_->reward(traj.state_features(), traj.actions, traj.next_features());
       metrics.emplace_back("intrinsic/raw_reward", intrinsic_->last_raw_reward());

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <vector>
 
 #include "indrive/basics/check.h"
 
@@ -14,7 +16,23 @@ namespace {
 
 Tensor column(Tensor x) { return nn::reshape(x, Shape{x.numel(), 1}); }
 
+// Rows per task of row_values().
+constexpr std::int64_t kValueChunkRows = 512;
+
 }  // namespace
+
+std::vector<float> row_values(Tensor x, const std::function<Tensor(Tensor)>& fn) {
+  const std::int64_t rows = x.dim(0);
+  std::vector<float> out(static_cast<std::size_t>(rows));
+  const std::int64_t chunks = (rows + kValueChunkRows - 1) / kValueChunkRows;
+  nn::parallel_tasks(chunks, [&](std::int64_t c) {
+    const std::int64_t r0 = c * kValueChunkRows, r1 = std::min(rows, r0 + kValueChunkRows);
+    const Tensor v = fn(nn::slice(x, r0, r1, 0));
+    INDRIVE_CHECK_EQ(v.numel(), r1 - r0) << "row_values: one value per row";
+    std::copy_n(v.data(), r1 - r0, out.data() + r0);
+  });
+  return out;
+}
 
 Tensor ImaginedTrajectory::state_features() const {
   return nn::slice(features, 0, static_cast<std::int64_t>(horizon) * n, 0);
@@ -68,20 +86,49 @@ ImaginedTrajectory ActorCritic::imagine(WorldModel& wm, const RssmState& start, 
   INDRIVE_CHECK(start_cont.empty() || static_cast<int>(start_cont.size()) == traj.n)
       << "start_cont has " << start_cont.size() << " entries for " << traj.n << " start states";
   traj.start_cont = std::move(start_cont);
-  RssmState state{nn::stop_gradient(start.deter), nn::stop_gradient(start.stoch)};
-  std::vector<Tensor> feats{WorldModel::features(state)}, actions;
-  for (int t = 0; t < traj.horizon; ++t) {
-    Tensor action = nn::sample_straight_through(action_probs(feats.back()), kNumActions, rng);
-    state = wm.img_step(state, action, rng);
-    feats.push_back(WorldModel::features(state));
-    actions.push_back(action);
-  }
-  traj.features = nn::concat(feats, 0);
-  traj.actions = nn::concat(actions, 0);
-  // The continuation of every imagined state, in one pass over all H * N rows rather than H
-  // passes of N: the head reads nothing but the state, so the loop does not need it.
-  Tensor cont = nn::sigmoid(wm.cont_logits(traj.next_features()));
-  traj.cont.assign(cont.values().begin(), cont.values().end());
+  const std::int64_t n = traj.n, h = traj.horizon;
+  const std::int64_t deter = start.deter.dim(1), feat = deter + start.stoch.dim(1);
+  traj.features = nn::empty(Shape{(h + 1) * n, feat});
+  traj.actions = nn::empty(Shape{h * n, kNumActions});
+  traj.cont.resize(static_cast<std::size_t>(h * n));
+  const Tensor start_deter = nn::stop_gradient(start.deter);
+  const Tensor start_stoch = nn::stop_gradient(start.stoch);
+  // Rows of a step of one chunk into the trajectory's time-major tables (row t * N + i).
+  auto put = [](Tensor from, Tensor to, std::int64_t row, std::int64_t col) {
+    const std::int64_t width = from.dim(1), stride = to.dim(1);
+    for (std::int64_t r = 0; r < from.dim(0); ++r)
+      std::copy_n(from.data() + r * width, width, to.data() + (row + r) * stride + col);
+  };
+  // The start states are rolled out in chunks of a fixed size, each on one thread and its own
+  // graph, with its own random stream drawn from `rng`: the rollout is H steps of ops on N rows,
+  // too small to split op by op (on the tiny preset it ran on one of two threads), while the
+  // chunks are independent. Fixed chunks and streams keep the trajectory the same for any
+  // thread count.
+  const std::uint64_t seed = rng.next_u64();
+  const std::int64_t chunks = (n + kImagineChunkRows - 1) / kImagineChunkRows;
+  nn::parallel_tasks(chunks, [&](std::int64_t c) {
+    const std::int64_t r0 = c * kImagineChunkRows, r1 = std::min(n, r0 + kImagineChunkRows);
+    nn::Rng chunk_rng(seed + static_cast<std::uint64_t>(c) * 0x9E3779B97F4A7C15ull);
+    RssmState state{nn::slice(start_deter, r0, r1, 0), nn::slice(start_stoch, r0, r1, 0)};
+    put(state.deter, traj.features, r0, 0);
+    put(state.stoch, traj.features, r0, deter);
+    std::vector<Tensor> next(h);
+    for (std::int64_t t = 0; t < h; ++t) {
+      const Tensor action = nn::sample_straight_through(action_probs(WorldModel::features(state)),
+                                                        kNumActions, chunk_rng);
+      state = wm.img_step(state, action, chunk_rng);
+      next[t] = WorldModel::features(state);
+      put(action, traj.actions, t * n + r0, 0);
+      put(state.deter, traj.features, (t + 1) * n + r0, 0);
+      put(state.stoch, traj.features, (t + 1) * n + r0, deter);
+    }
+    // The continuation of the chunk's imagined states, in one pass over its H steps rather
+    // than one per step: the head reads nothing but the state, so the loop does not need it.
+    const Tensor cont = nn::sigmoid(wm.cont_logits(nn::concat(next, 0)));
+    const std::int64_t rows = r1 - r0;
+    for (std::int64_t t = 0; t < h; ++t)
+      std::copy_n(cont.data() + t * rows, rows, traj.cont.data() + t * n + r0);
+  });
   return traj;
 }
 
@@ -96,16 +143,14 @@ Tensor ActorCritic::loss(const ImaginedTrajectory& traj, const std::vector<float
   // values also serve the returns, so the critic runs once more only on the N last states.
   Tensor logits = critic_(states);
   // Values of all H + 1 states, lambda-returns, cumulative-discount weights (no tape).
-  std::vector<float> values, slow_values, returns, weights(rows);
-  {
-    nn::NoGradGuard no_grad;
-    Tensor v = nn::twohot_mean(nn::stop_gradient(logits));
-    values.assign(v.values().begin(), v.values().end());
-    Tensor last = nn::twohot_mean(critic_(nn::slice(traj.features, rows, rows + n, 0)));
-    values.insert(values.end(), last.values().begin(), last.values().end());
-    Tensor slow = nn::twohot_mean(slow_critic_(states));
-    slow_values.assign(slow.values().begin(), slow.values().end());
-  }
+  std::vector<float> values =
+      row_values(nn::stop_gradient(logits), [](Tensor l) { return nn::twohot_mean(l); });
+  const std::vector<float> last = row_values(nn::slice(traj.features, rows, rows + n, 0),
+                                             [&](Tensor u) { return nn::twohot_mean(critic_(u)); });
+  values.insert(values.end(), last.begin(), last.end());
+  const std::vector<float> slow_values =
+      row_values(states, [&](Tensor u) { return nn::twohot_mean(slow_critic_(u)); });
+  std::vector<float> returns, weights(rows);
   returns = lambda_returns(rewards, traj.cont, values, h, n, config_.gamma, config_.lambda);
   for (int i = 0; i < n; ++i) weights[i] = traj.start_cont.empty() ? 1.0f : traj.start_cont[i];
   for (int t = 1; t < h; ++t) {

@@ -41,17 +41,25 @@ RssmState WorldModel::initial(int n) {
   return {deter, nn::mode_one_hot(probs, config_.classes)};
 }
 
-RssmState WorldModel::img_step(const RssmState& prev, Tensor action, nn::Rng& rng,
-                               Tensor* prior_probs) {
+Tensor WorldModel::next_deter(const RssmState& prev, Tensor action) {
   Tensor x = nn::silu(img_in_norm_(img_in_(nn::concat({prev.stoch, action}, -1))));
-  Tensor deter = gru_(x, prev.deter);
-  Tensor probs = nn::unimix_probs(prior_head_(deter), config_.classes, config_.unimix);
-  if (prior_probs != nullptr) *prior_probs = probs;
+  return gru_(x, prev.deter);
+}
+
+Tensor WorldModel::prior_probs(Tensor deter) {
+  return nn::unimix_probs(prior_head_(deter), config_.classes, config_.unimix);
+}
+
+RssmState WorldModel::img_step(const RssmState& prev, Tensor action, nn::Rng& rng,
+                               Tensor* prior_probs_out) {
+  Tensor deter = next_deter(prev, action);
+  Tensor probs = prior_probs(deter);
+  if (prior_probs_out != nullptr) *prior_probs_out = probs;
   return {deter, nn::sample_straight_through(probs, config_.classes, rng)};
 }
 
 RssmState WorldModel::obs_step(const RssmState& prev, Tensor action, Tensor embed, Tensor is_first,
-                               nn::Rng& rng, Tensor* post_probs, Tensor* prior_probs) {
+                               nn::Rng& rng, Tensor* post_probs, Tensor* prior_probs_out) {
   const int n = static_cast<int>(prev.deter.dim(0));
   RssmState start = prev;
   bool any_first = false;
@@ -64,11 +72,13 @@ RssmState WorldModel::obs_step(const RssmState& prev, Tensor action, Tensor embe
     start.stoch = nn::add(nn::mul(prev.stoch, keep), nn::mul(init.stoch, is_first));
     action = nn::mul(action, keep);
   }
-  RssmState prior = img_step(start, action, rng, prior_probs);
-  Tensor probs = nn::unimix_probs(post_head_(nn::concat({prior.deter, embed}, -1)), config_.classes,
-                                  config_.unimix);
+  // The prior's sample would go unused: only its probabilities, where asked for.
+  Tensor deter = next_deter(start, action);
+  if (prior_probs_out != nullptr) *prior_probs_out = prior_probs(deter);
+  Tensor probs =
+      nn::unimix_probs(post_head_(nn::concat({deter, embed}, -1)), config_.classes, config_.unimix);
   if (post_probs != nullptr) *post_probs = probs;
-  return {prior.deter, nn::sample_straight_through(probs, config_.classes, rng)};
+  return {deter, nn::sample_straight_through(probs, config_.classes, rng)};
 }
 
 bool WorldModel::acts_with(const std::string& param) {
@@ -142,29 +152,29 @@ WorldModelOutput WorldModel::observe(const SequenceBatch& batch, bool with_rewar
   Tensor actions = action_one_hot(batch.actions, b_size, t_size);       // (N, 9)
 
   // Posterior rollout; the action that led to step t is the one taken at step t - 1.
-  std::vector<Tensor> deters, stochs, posts, priors;
+  std::vector<Tensor> deters, stochs, posts;
   RssmState state = initial(b_size);
   Tensor prev_action = nn::zeros(Shape{b_size, kNumActions});
   for (int t = 0; t < t_size; ++t) {
-    Tensor post, prior;
+    Tensor post;
     state = obs_step(state, prev_action, nn::slice(embed, t * b_size, (t + 1) * b_size, 0),
-                     nn::slice(is_first, t * b_size, (t + 1) * b_size, 0), rng, &post, &prior);
+                     nn::slice(is_first, t * b_size, (t + 1) * b_size, 0), rng, &post);
     deters.push_back(state.deter);
     stochs.push_back(state.stoch);
     posts.push_back(post);
-    priors.push_back(prior);
     prev_action = nn::slice(actions, t * b_size, (t + 1) * b_size, 0);
   }
   WorldModelOutput out;
   out.deter = nn::concat(deters, 0);
   out.stoch = nn::concat(stochs, 0);
   out.post_probs = nn::concat(posts, 0);
-  Tensor prior_probs = nn::concat(priors, 0);
+  // The prior at every step in one pass over all N rows: the loop needs only its h.
+  const Tensor priors = prior_probs(out.deter);
   out.features = nn::concat({out.deter, out.stoch}, -1);
 
   // KL balancing with free bits on the KL summed over all latents.
-  Tensor kl_dyn = nn::kl_categorical(nn::stop_gradient(out.post_probs), prior_probs);  // (N)
-  Tensor kl_rep = nn::kl_categorical(out.post_probs, nn::stop_gradient(prior_probs));  // (N)
+  Tensor kl_dyn = nn::kl_categorical(nn::stop_gradient(out.post_probs), priors);  // (N)
+  Tensor kl_rep = nn::kl_categorical(out.post_probs, nn::stop_gradient(priors));  // (N)
   Tensor dyn = nn::mean(nn::maximum(kl_dyn, config_.free_nats));
   Tensor rep = nn::mean(nn::maximum(kl_rep, config_.free_nats));
   // Reconstruction: squared error summed over pixels and channels, mean over the batch.

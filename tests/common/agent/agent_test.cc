@@ -7,6 +7,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <numeric>
 
 #include "dot_env.h"
 #include "indrive/agent/policy.h"
@@ -175,14 +176,17 @@ TEST(Agent, FinetuneContTrainsOnlyTheContinuationHead) {
       EXPECT_TRUE(at_terminal.back() > 0.0f && at_terminal.back() < 1.0f) << at_terminal.back();
     }
     EXPECT_EQ(values_named(agent.world_model().params(), false), body);
+    // Means of the first and last 10 updates: each loss is of one posterior sample of the
+    // batch, which moves it by about 10% from update to update even with the head frozen.
+    const auto mean10 = [](auto first) { return std::accumulate(first, first + 10, 0.0f) / 10; };
+    const float before = mean10(cont_loss.begin()), after = mean10(cont_loss.end() - 10);
     if (train_cont) {
       EXPECT_NE(values_named(agent.world_model().params(), true), head);
       // It fits the batch's continuation targets (terminal steps included).
-      EXPECT_LT(cont_loss.back(), 0.7f * cont_loss.front())
-          << cont_loss.front() << " -> " << cont_loss.back();
+      EXPECT_LT(after, 0.7f * before) << before << " -> " << after;
     } else {
       EXPECT_EQ(values_named(agent.world_model().params(), true), head);
-      EXPECT_NEAR(cont_loss.back(), cont_loss.front(), 0.05f * cont_loss.front());
+      EXPECT_NEAR(after, before, 0.1f * before);
     }
   }
 }

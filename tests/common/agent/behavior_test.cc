@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <vector>
 
 namespace indrive::agent {
 namespace {
@@ -74,6 +76,89 @@ TEST(ActorCritic, LossesNeverReachTheWorldModel) {
   }
   EXPECT_GT(nn::grad_norm(ac.actor_params()), 0.0f);
   EXPECT_GT(nn::grad_norm(ac.critic_params()), 0.0f);
+}
+
+// A rollout of more start states than one chunk: the chunks' rows land time-major (each
+// imagined deterministic state is the world model's step from the row before it with the action
+// taken there), the chunks draw different samples, and 1 and 2 threads give the same trajectory
+// bitwise.
+TEST(ActorCritic, ChunkedRolloutIsTimeMajorAndTheSameForAnyThreadCount) {
+  const std::int64_t n = 2 * ActorCritic::kImagineChunkRows + ActorCritic::kImagineChunkRows / 2;
+  const WorldModelConfig model = preset("tiny").world_model;
+  std::vector<std::vector<float>> runs;
+  for (const int threads : {1, 2}) {
+    nn::set_threads(threads);
+    nn::Rng rng(5);
+    WorldModel wm(model, rng);
+    ActorCritic ac("expl", fast_behavior(), model.feat_dim(), rng);
+    nn::current_graph().reset();
+    const ImaginedTrajectory traj = ac.imagine(wm, wm.initial(static_cast<int>(n)), rng);
+    const int h = traj.horizon;
+    ASSERT_EQ(traj.features.dim(0), (h + 1) * n);
+    ASSERT_EQ(traj.actions.dim(0), h * n);
+    ASSERT_EQ(traj.cont.size(), static_cast<std::size_t>(h * n));
+    runs.emplace_back(traj.features.values().begin(), traj.features.values().end());
+    runs.back().insert(runs.back().end(), traj.actions.values().begin(),
+                       traj.actions.values().end());
+    runs.back().insert(runs.back().end(), traj.cont.begin(), traj.cont.end());
+    // Row t * n + i holds step t of start i: the deterministic state one step on is the world
+    // model's from it and the action taken there (img_step's deter does not use its rng).
+    const std::int64_t deter = model.deter, feat = model.feat_dim();
+    nn::Rng unused(0);
+    for (int t = 0; t < h; ++t) {
+      const Tensor u = nn::slice(traj.features, t * n, (t + 1) * n, 0);
+      const RssmState state{nn::slice(u, 0, deter, 1), nn::slice(u, deter, feat, 1)};
+      const Tensor next =
+          wm.img_step(state, nn::slice(traj.actions, t * n, (t + 1) * n, 0), unused).deter;
+      for (std::int64_t i = 0; i < n; ++i)
+        for (std::int64_t d = 0; d < deter; ++d)
+          ASSERT_NEAR(next.data()[i * deter + d],
+                      traj.features.data()[((t + 1) * n + i) * feat + d], 1e-5f)
+              << "step " << t << ", start " << i;
+    }
+    // The starts are equal, so only the chunks' own random streams set their actions apart.
+    std::int64_t differ = 0;
+    for (std::int64_t k = 0; k < h * kNumActions; ++k) {
+      const std::int64_t t = k / kNumActions, a = k % kNumActions;
+      differ += traj.actions.data()[(t * n) * kNumActions + a] !=
+                traj.actions.data()[(t * n + ActorCritic::kImagineChunkRows) * kNumActions + a];
+    }
+    EXPECT_GT(differ, 0) << "the first two chunks drew the same actions";
+  }
+  nn::set_threads(1);
+  ASSERT_EQ(runs[0].size(), runs[1].size());
+  EXPECT_EQ(std::memcmp(runs[0].data(), runs[1].data(), runs[0].size() * sizeof(float)), 0);
+}
+
+// row_values over more rows than one chunk: the same values as one pass over all rows (the op
+// is per row), in row order, with 1 and 2 threads; a function giving the wrong count is refused.
+TEST(RowValues, MatchesOnePassInRowOrderForAnyThreadCount) {
+  nn::Rng rng(3);
+  nn::ParamGroup group("net");
+  const nn::Mlp net(group, "critic", 12, {.units = 16, .layers = 2, .out = nn::kTwoHotBins}, rng);
+  nn::current_graph().reset();
+  const std::int64_t rows = 1100;
+  std::vector<float> x(rows * 12);
+  for (std::size_t i = 0; i < x.size(); ++i) x[i] = std::sin(0.37f * static_cast<float>(i));
+  const Tensor in = nn::constant(Shape{rows, 12}, x);
+  auto fn = [&](Tensor u) { return nn::twohot_mean(net(u)); };
+  std::vector<float> whole;
+  {
+    nn::set_threads(1);
+    nn::NoGradGuard no_grad;
+    const Tensor v = fn(in);
+    whole.assign(v.values().begin(), v.values().end());
+  }
+  for (const int threads : {1, 2}) {
+    nn::set_threads(threads);
+    const std::vector<float> chunked = row_values(in, fn);
+    ASSERT_EQ(chunked.size(), whole.size());
+    for (std::int64_t r = 0; r < rows; ++r)
+      ASSERT_NEAR(chunked[r], whole[r], 1e-5f * (1.0f + std::abs(whole[r]))) << "row " << r;
+  }
+  nn::set_threads(1);
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_DEATH(row_values(in, [](Tensor u) { return nn::sum(u); }), "one value per row");
 }
 
 TEST(ActorCritic, LearnsTheRewardedActionInImagination) {

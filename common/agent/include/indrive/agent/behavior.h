@@ -11,6 +11,8 @@
 //   graph.backward(loss); ac.step();
 #pragma once
 
+#include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -37,6 +39,13 @@ struct ImaginedTrajectory {
   nn::Tensor next_features() const;   // (H * N, feat) u_1 .. u_H
 };
 
+// fn(part), one value per row, over every row of x (rows, d) without a tape, in fixed chunks
+// of rows side by side on the engine's threads (nn::parallel_tasks): whole chunks need no
+// barrier between their ops, where split op by op a thread descheduled by another job held
+// every op, and fixed chunks keep the values the same for any thread count. fn reads only
+// parameters and its part, e.g. [&](Tensor u) { return nn::twohot_mean(critic(u)); }.
+std::vector<float> row_values(nn::Tensor x, const std::function<nn::Tensor(nn::Tensor)>& fn);
+
 // Metrics of one actor-critic loss.
 struct BehaviorMetrics {
   float actor_loss = 0, critic_loss = 0, entropy = 0, return_mean = 0, reward_mean = 0;
@@ -54,8 +63,13 @@ class ActorCritic {
 
   // Action probabilities (N, 9) with the 1% uniform mix, from features (N, feat).
   nn::Tensor action_probs(nn::Tensor features);
-  // Rolls the actor through the prior for H steps from `start` (N rows, stop-gradient).
-  // start_cont (N, or empty) is the start states' continuation, kept in the trajectory.
+  // Start states per chunk of the imagined rollout: chunks run side by side, one per thread,
+  // each with its own random stream, so the trajectory does not depend on the thread count.
+  static constexpr std::int64_t kImagineChunkRows = 64;
+
+  // Rolls the actor through the prior for H steps from `start` (N rows, stop-gradient), in
+  // chunks of kImagineChunkRows start states on the engine's threads. start_cont (N, or empty)
+  // is the start states' continuation, kept in the trajectory.
   ImaginedTrajectory imagine(WorldModel& wm, const RssmState& start, nn::Rng& rng,
                              std::vector<float> start_cont = {});
   // Actor + critic loss (a recorded scalar) of a trajectory and its rewards (H * N), reward

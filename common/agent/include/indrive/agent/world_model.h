@@ -58,9 +58,10 @@ class WorldModel {
   // prior_probs, when given, receives the (N, stoch * classes) prior probabilities.
   RssmState img_step(const RssmState& prev, nn::Tensor action, nn::Rng& rng,
                      nn::Tensor* prior_probs = nullptr);
-  // One posterior step from an embedding: the prior step, then s' ~ q(s | h', embed).
-  // embed is (N, embed_dim); is_first is (N, 1) 0/1 and resets state and action to the
-  // initial ones where 1. post_probs / prior_probs receive (N, stoch * classes) when given.
+  // One posterior step from an embedding: h' as in the prior step, then s' ~ q(s | h', embed)
+  // (the prior is not sampled). embed is (N, embed_dim); is_first is (N, 1) 0/1 and resets
+  // state and action to the initial ones where 1. post_probs / prior_probs receive
+  // (N, stoch * classes) when given (the prior's only then computed).
   RssmState obs_step(const RssmState& prev, nn::Tensor action, nn::Tensor embed,
                      nn::Tensor is_first, nn::Rng& rng, nn::Tensor* post_probs = nullptr,
                      nn::Tensor* prior_probs = nullptr);
@@ -72,6 +73,8 @@ class WorldModel {
   nn::Tensor cont_logits(nn::Tensor features);
   // Reward two-hot logits (N, 255) of features (N, feat); callers pass stop-gradient features.
   nn::Tensor reward_logits(nn::Tensor features);
+  // The prior probabilities (N, stoch * classes) at deterministic states h (N, deter).
+  nn::Tensor prior_probs(nn::Tensor deter);
   // u = [h; s]: (N, feat).
   static nn::Tensor features(const RssmState& state);
 
@@ -109,6 +112,9 @@ class WorldModel {
   nn::Mlp cont_head_;
   nn::Mlp reward_head_;
   nn::Parameter* initial_ = nullptr;  // (1, deter), tanh gives h0
+
+  // h' = GRU(h, img_in([s, a])), the deterministic part of a step.
+  nn::Tensor next_deter(const RssmState& prev, nn::Tensor action);
 };
 
 }  // namespace indrive::agent
