@@ -10,9 +10,12 @@ namespace {
 
 constexpr int kColumns = 17;
 
-// Quotes a field if it holds a comma, a quote or a newline (RFC 4180).
+// Quotes a field if it holds a comma or a quote (RFC 4180). A line break is refused: the files
+// are read line by line, and a writer reopening one counts and cuts rows at line ends.
 std::string quote(const std::string& field) {
-  if (field.find_first_of(",\"\n") == std::string::npos) return field;
+  if (field.find_first_of("\r\n") != std::string::npos)
+    throw CsvError("a results field may not hold a line break: '" + field + "'");
+  if (field.find_first_of(",\"") == std::string::npos) return field;
   std::string out = "\"";
   for (const char c : field) {
     if (c == '"') out += '"';

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <string>
+
 #include "testing.h"
 
 namespace indrive {
@@ -71,6 +73,23 @@ TEST(EpisodeCsv, AWriterCutsARowLeftPartialByACrashAndCountsTheRows) {
   ASSERT_EQ(records.size(), 3u);
   EXPECT_EQ(records[2].episode, 2);
   EXPECT_EQ(EpisodeCsvWriter(path).rows(), 3);
+}
+
+// A field with a line break is refused before anything is written: the files are read line by
+// line, and a reopening writer counts and cuts rows at line ends.
+TEST(EpisodeCsv, AFieldWithALineBreakIsRefusedAndNothingIsWritten) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "eval.csv";
+  EpisodeCsvWriter writer(path);
+  writer.write(sample(0, true));
+  for (const std::string route : {"two\nlines", "carriage\rreturn"}) {
+    EpisodeRecord bad = sample(1, false);
+    bad.route = route;
+    EXPECT_THROW(writer.write(bad), CsvError) << route;
+  }
+  EXPECT_EQ(writer.rows(), 1);
+  EXPECT_EQ(EpisodeCsvWriter(path).rows(), 1);
+  ASSERT_EQ(read_episode_csv(path).size(), 1u);
 }
 
 TEST(EpisodeCsv, APartialRowOrWrongHeaderIsAClearError) {
