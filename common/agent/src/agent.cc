@@ -121,6 +121,7 @@ Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   } catch (const nn::PrecisionError& e) {
     throw AgentConfigError(std::string("agent.") + e.what());
   }
+  nn::flush_denormals();
   wm_ = std::make_unique<WorldModel>(config_.world_model, rng_);
   intrinsic_ = make_intrinsic(config_.intrinsic, config_.world_model, rng_);
   expl_ =

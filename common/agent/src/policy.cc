@@ -23,6 +23,7 @@ Policy::Policy(const AgentConfig& config)
       rng_(config.seed ^ 0x9e3779b97f4a7c15ull),
       actor_params_(actor_group_name(config.phase)) {
   validate(config_);
+  nn::flush_denormals();
   nn::Rng init(config.seed);
   wm_ = std::make_unique<WorldModel>(config_.world_model, init);
   // Same layer names and options as ActorCritic's actor, so snapshot groups load one to one.

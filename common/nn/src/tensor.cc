@@ -3,6 +3,9 @@
 #include "indrive/nn/tensor.h"
 
 #include <omp.h>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 #include <sys/mman.h>
 
 #include <algorithm>
@@ -562,6 +565,24 @@ void set_threads(int threads) {
   omp_set_num_threads(threads);
   // Eigen's own GEMM threading stays off: the engine splits large products itself.
   Eigen::setNbThreads(1);
+  flush_denormals();
+}
+
+bool flush_denormals() {
+#if defined(__SSE2__)
+  // MXCSR bit 15 (flush to zero) and bit 6 (denormals are zero). The register is per thread,
+  // and OpenMP keeps its threads between parallel regions, so setting it once in a region of
+  // the engine's thread count reaches every thread that runs an op.
+  const auto set = [] { _mm_setcsr(_mm_getcsr() | 0x8040u); };
+  set();
+  if (!omp_in_parallel()) {
+#pragma omp parallel num_threads(threads())
+    set();
+  }
+  return true;
+#else
+  return false;
+#endif
 }
 
 int threads() { return g_threads > 0 ? g_threads : omp_get_max_threads(); }

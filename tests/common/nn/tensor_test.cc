@@ -2,6 +2,7 @@
 #include "indrive/nn/tensor.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -274,6 +275,26 @@ std::vector<float> conv_model_grads(int threads) {
   g.reset();
   set_threads(1);
   return out;
+}
+
+// After set_threads, every engine thread flushes denormals: a product below the smallest normal
+// float comes out 0 (FTZ), and a denormal input counts as 0 (DAZ), on each of the two threads.
+TEST(ThreadsTest, EveryEngineThreadFlushesDenormals) {
+  set_threads(2);
+  if (!flush_denormals()) GTEST_SKIP() << "no x86 flush-to-zero control on this CPU";
+  std::vector<float> underflow(2, -1.0f), denormal_in(2, -1.0f);
+#pragma omp parallel num_threads(2)
+  {
+    volatile float tiny = 1e-30f, scale = 1e-10f, denormal = 1e-40f, one = 1.0f;
+    const int t = omp_get_thread_num();
+    underflow[t] = tiny * scale;  // 1e-40: a denormal without FTZ
+    denormal_in[t] = denormal * one;
+  }
+  set_threads(1);
+  for (int t = 0; t < 2; ++t) {
+    EXPECT_EQ(underflow[t], 0.0f) << "thread " << t;
+    EXPECT_EQ(denormal_in[t], 0.0f) << "thread " << t;
+  }
 }
 
 TEST(ThreadsTest, TwoThreadsAgreeWithOne) {

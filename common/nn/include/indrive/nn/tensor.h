@@ -361,8 +361,14 @@ class Rng {
 
 // Sets the number of threads used by the engine (OpenMP loops; large GEMMs are split over
 // them, small ops stay on the calling thread). With one thread and a fixed seed, results are
-// bitwise reproducible.
+// bitwise reproducible. Its threads then flush denormals (flush_denormals()).
 void set_threads(int threads);
+// Makes the calling thread and the engine's OpenMP threads treat denormal floats (magnitudes
+// below 1.2e-38) as zero, in inputs and results (x86 FTZ and DAZ; elsewhere nothing): an
+// operation on a denormal takes up to about a hundred times as long, and training makes them
+// (exp of very negative logits, tiny gradients and Adam moments). Called by set_threads and
+// by every agent and policy on its thread. Returns whether the CPU does it.
+bool flush_denormals();
 // The number of threads set by set_threads (default: OpenMP's default).
 int threads();
 
