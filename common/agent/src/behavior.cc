@@ -150,8 +150,9 @@ Tensor ActorCritic::loss(const ImaginedTrajectory& traj, const std::vector<float
   values.insert(values.end(), last.begin(), last.end());
   const std::vector<float> slow_values =
       row_values(states, [&](Tensor u) { return nn::twohot_mean(slow_critic_(u)); });
-  std::vector<float> returns, weights(rows);
-  returns = lambda_returns(rewards, traj.cont, values, h, n, config_.gamma, config_.lambda);
+  const std::vector<float> returns =
+      lambda_returns(rewards, traj.cont, values, h, n, config_.gamma, config_.lambda);
+  std::vector<float> weights(rows);
   for (int i = 0; i < n; ++i) weights[i] = traj.start_cont.empty() ? 1.0f : traj.start_cont[i];
   for (int t = 1; t < h; ++t) {
     for (int i = 0; i < n; ++i) {
