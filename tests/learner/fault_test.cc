@@ -11,6 +11,7 @@
 #include <map>
 #include <optional>
 #include <regex>
+#include <sstream>
 #include <thread>
 
 #include "indrive/agent/replay.h"
@@ -57,6 +58,8 @@ class FaultTest : public ::testing::Test {
   // Every log of the test directory and the launcher's run logs, for failure messages.
   // Actor logs come first and each is cut to its last 4,000 characters, so that a failure
   // message cut short by a CI log still shows the actors.
+  // The logs of the run, the learner's and the launcher's first (a long failure message is cut
+  // in the middle by CI), each without the environment's per-episode lines, which fill any cap.
   std::string logs() const {
     std::vector<fs::path> files;
     for (const fs::path& folder : {dir_.path(), run_dir_ / "logs"}) {
@@ -68,17 +71,29 @@ class FaultTest : public ::testing::Test {
     std::stable_sort(files.begin(), files.end(), [](const fs::path& a, const fs::path& b) {
       const bool actor_a = a.filename().string().starts_with("actor");
       const bool actor_b = b.filename().string().starts_with("actor");
-      return actor_a != actor_b ? actor_a : a.filename() < b.filename();
+      return actor_a != actor_b ? actor_b : a.filename() < b.filename();
     });
     std::string text;
     for (const auto& file : files) {
-      std::string body = testing::slurp(file);
+      std::istringstream lines(testing::slurp(file));
+      std::string body;
+      int episodes = 0;
+      for (std::string line; std::getline(lines, line);) {
+        if (line.find("[env] episode ") != std::string::npos) {
+          ++episodes;
+        } else {
+          body += line + "\n";
+        }
+      }
       if (body.size() > 4000) body = "...\n" + body.substr(body.size() - 4000);
       text += "----- " + file.parent_path().filename().string() + "/" + file.filename().string() +
-              "\n" + body;
+              " (" + std::to_string(episodes) + " episode lines left out)\n" + body;
     }
     return text;
   }
+
+  // The same after what the watch saw.
+  std::string logs(ProcessWatch& watch) const { return watch.describe() + "\n" + logs(); }
 
   std::vector<nlohmann::json> metrics() const {
     return testing::read_metrics(run_dir_ / "metrics.jsonl");
@@ -168,9 +183,9 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
                  dir_.path() / "launch.log");
   ASSERT_TRUE(wait_until(90s, [&] {
     return watch.min_newest_chunk_version({0, 1}) >= 2;
-  })) << logs();
+  })) << logs(watch);
   const auto victims = testing::child_pids(launcher.pid(), {"--id", "0"});
-  ASSERT_EQ(victims.size(), 1u) << logs();
+  ASSERT_EQ(victims.size(), 1u) << logs(watch);
   SeenHeartbeat learner_at_kill;
   ASSERT_TRUE(watch.heartbeat(msg::ROLE_LEARNER, 0, learner_at_kill));
   const std::uint64_t newest_at_kill = watch.newest_snapshot();
@@ -190,7 +205,7 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
     const auto pids = testing::child_pids(launcher.pid(), {"--id", "0"});
     if (pids.size() == 1 && pids[0] != victims[0]) restarted = pids[0];
     return restarted > 0;
-  })) << logs();
+  })) << logs(watch);
   const double restart_seen_at = watch.now_s();
   const double respawned_s = restart_seen_at - killed_at;
 
@@ -222,7 +237,7 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
                            return false;
                          }))
       << "newest snapshot at the kill: v" << newest_at_kill << "\n"
-      << logs();
+      << logs(watch);
 
   // The learner carried on (it trained on actor 1's data meanwhile) and actor 1 kept its
   // process and kept sending. Not without a pause: a process killed while it held the lock of
@@ -259,10 +274,10 @@ TEST_F(FaultTest, ActorKilledUnderLaunchIsRestartedAndRejoinsWithTheNewestSnapsh
   ASSERT_TRUE(wait_until(30s, [&] {
     return testing::child_pids(launcher.pid(), {"--id", "0"}).empty() &&
            testing::child_pids(launcher.pid(), {"--id", "1"}).empty();
-  })) << logs();
+  })) << logs(watch);
   std::this_thread::sleep_for(1500ms);
   launcher.signal(SIGINT);
-  ASSERT_EQ(launcher.wait(60s), 0) << logs();
+  ASSERT_EQ(launcher.wait(60s), 0) << logs(watch);
 
   // Nothing partial entered replay: the learner stored exactly the complete chunks that went
   // over the wire, no more steps (a cut chunk of the killed actor) and no fewer.
@@ -309,7 +324,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   auto actor1 = start_actor(1);
   ASSERT_TRUE(wait_until(90s, [&] {
     return watch.min_newest_chunk_version({0, 1}) >= 2;
-  })) << logs();
+  })) << logs(watch);
 
   // Kill the learner after a checkpoint and after snapshots newer than that checkpoint went
   // out, so the restarted learner must not hand out those version numbers again.
@@ -321,7 +336,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
     if (!newest) return false;
     at_checkpoint = learner::unpack_checkpoint(read_file(*newest), agent_bytes, &replay_bytes);
     return at_checkpoint.updates > 0 && watch.newest_snapshot() > at_checkpoint.policy_version;
-  })) << logs();
+  })) << logs(watch);
   const double killed_at = watch.now_s();
   learner->signal(SIGKILL);
   ASSERT_EQ(learner->wait(10s), 128 + SIGKILL);
@@ -351,7 +366,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
                            return true;
                          }))
       << "both actors must say they wait for an allowance after the learner's kill\n"
-      << logs();
+      << logs(watch);
   const double waiting_after_s = watch.now_s() - killed_at;
   std::this_thread::sleep_for(1s);
   const auto quiet_from = watch.now_s();
@@ -361,7 +376,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   const double window_s = watch.now_s() - quiet_from;
   const double busy0 = (testing::cpu_seconds(actor0->pid()) - cpu0) / window_s;
   const double busy1 = (testing::cpu_seconds(actor1->pid()) - cpu1) / window_s;
-  ASSERT_TRUE(actor0->running() && actor1->running()) << logs();
+  ASSERT_TRUE(actor0->running() && actor1->running()) << logs(watch);
   for (const auto& chunk : watch.chunks()) {
     EXPECT_LT(chunk.time_s, quiet_from) << "actor " << chunk.actor_id << " sent chunk "
                                         << chunk.chunk_seq << " with no learner to allow it";
@@ -386,7 +401,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
     if (watch.min_newest_chunk_version({0, 1}) <= published_before) return false;
     rejoin_s = watch.now_s() - restarted_at;
     return true;
-  })) << logs();
+  })) << logs(watch);
   for (const auto& snapshot : watch.snapshots()) {
     if (snapshot.time_s > restarted_at) {
       EXPECT_GT(snapshot.version, published_before)
@@ -396,16 +411,17 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   const std::int64_t checkpoint_steps = at_checkpoint.env_steps;
   ASSERT_TRUE(wait_until(30s, [&] {
     SeenHeartbeat beat;
-    // Only the restarted learner's heartbeats: the killed one's last may still be the newest.
+    // Only the restarted learner's heartbeats: the killed one's last may
+    // still be the newest.
     return watch.heartbeat(msg::ROLE_LEARNER, 0, beat) && beat.time_s > restarted_at + 0.5 &&
            beat.updates > static_cast<std::uint64_t>(at_checkpoint.updates) + 5;
-  })) << logs();
+  })) << logs(watch);
   actor0->signal(SIGTERM);
   actor1->signal(SIGTERM);
-  EXPECT_EQ(actor0->wait(30s), 0) << logs();
-  EXPECT_EQ(actor1->wait(30s), 0) << logs();
+  EXPECT_EQ(actor0->wait(30s), 0) << logs(watch);
+  EXPECT_EQ(actor1->wait(30s), 0) << logs(watch);
   learner->signal(SIGTERM);
-  ASSERT_EQ(learner->wait(60s), 0) << logs();
+  ASSERT_EQ(learner->wait(60s), 0) << logs(watch);
 
   // The log names the replay steps it restored: all the checkpoint held (capacity exceeds the
   // run), so nothing had to be refilled.
@@ -421,7 +437,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   for (const auto& line : lines) {
     if (line.value("learner_epoch", 0) == 2) resumed.push_back(line);
   }
-  ASSERT_FALSE(resumed.empty()) << logs();
+  ASSERT_FALSE(resumed.empty()) << logs(watch);
   EXPECT_GE(resumed.front().value("env_steps", 0), checkpoint_steps);
   EXPECT_GE(resumed.front().value("updates", 0), at_checkpoint.updates);
   EXPECT_GT(resumed.back().value("env_steps", 0), checkpoint_steps);
@@ -475,9 +491,9 @@ TEST_F(FaultTest, LearnerKilledUnderLaunchIsRestartedAndResumes) {
   CheckpointFiles files(run_dir_ / "checkpoints", 3);
   ASSERT_TRUE(wait_until(90s, [&] {
     return watch.min_newest_chunk_version({0, 1}) >= 2 && files.newest().has_value();
-  })) << logs();
+  })) << logs(watch);
   const auto victims = testing::child_pids(launcher.pid(), {learner_program});
-  ASSERT_EQ(victims.size(), 1u) << logs();
+  ASSERT_EQ(victims.size(), 1u) << logs(watch);
   ASSERT_EQ(::kill(victims[0], SIGKILL), 0);
   const double killed_at = watch.now_s();
   std::this_thread::sleep_for(200ms);
@@ -490,11 +506,11 @@ TEST_F(FaultTest, LearnerKilledUnderLaunchIsRestartedAndResumes) {
     const auto pids = testing::child_pids(launcher.pid(), {learner_program});
     if (pids.size() == 1 && pids[0] != victims[0]) restarted = pids[0];
     return restarted > 0;
-  })) << logs();
+  })) << logs(watch);
   const double respawned_s = watch.now_s() - killed_at;
   ASSERT_TRUE(wait_until(60s, [&] {
     return watch.min_newest_chunk_version({0, 1}) > published_before;
-  })) << logs();
+  })) << logs(watch);
   const double rejoined_s = watch.now_s() - killed_at;
   EXPECT_EQ(testing::child_pids(launcher.pid(), {"--id", "0"}).size(), 1u);
   EXPECT_EQ(testing::child_pids(launcher.pid(), {"--id", "1"}).size(), 1u);
@@ -507,15 +523,15 @@ TEST_F(FaultTest, LearnerKilledUnderLaunchIsRestartedAndResumes) {
     });
     return first != lines.end() && lines.back().value("updates", 0) > first->value("updates", 0);
   };
-  EXPECT_TRUE(wait_until(60s, trained_after_resume)) << logs();
+  EXPECT_TRUE(wait_until(60s, trained_after_resume)) << logs(watch);
   launcher.signal(SIGINT);
-  ASSERT_EQ(launcher.wait(60s), 0) << logs();
+  ASSERT_EQ(launcher.wait(60s), 0) << logs(watch);
 
   const auto lines = metrics();
   const auto resumed = std::find_if(lines.begin(), lines.end(), [](const nlohmann::json& line) {
     return line.value("learner_epoch", 0) == 2;
   });
-  ASSERT_NE(resumed, lines.end()) << logs();
+  ASSERT_NE(resumed, lines.end()) << logs(watch);
   EXPECT_GT(resumed->value("env_steps", 0), 0) << "resumed from the checkpoint, not from zero";
   EXPECT_GT(lines.back().value("updates", 0), resumed->value("updates", 0));
   EXPECT_NE(testing::slurp(run_dir_ / "logs" / "learner.log").find("resumed from"),
@@ -568,7 +584,7 @@ TEST_F(FaultTest, LateJoiningEvaluatorGetsTheNewestSnapshotAlsoThroughTheReReque
   auto actor1 = start_actor(1);
   ASSERT_TRUE(wait_until(90s, [&] {
     return watch.min_newest_chunk_version({0, 1}) >= 2 && watch.newest_snapshot() >= 4;
-  })) << logs();
+  })) << logs(watch);
 
   // An evaluator joining while training goes on gets a snapshot at least as new as the newest
   // one published when it started (transient-local history).
@@ -586,22 +602,22 @@ TEST_F(FaultTest, LateJoiningEvaluatorGetsTheNewestSnapshotAlsoThroughTheReReque
     const std::uint64_t version =
         evaluated_version(dir_.path() / "evaluator-history.log", std::chrono::seconds(60));
     const double after_s = testing::seconds_since(joined);
-    EXPECT_GE(version, newest_at_join) << logs();
+    EXPECT_GE(version, newest_at_join) << logs(watch);
     std::printf(
         "[figures] late evaluator (transient-local): v%llu (newest at its start v%llu) "
         "%.2f s after its process started\n",
         static_cast<unsigned long long>(version), static_cast<unsigned long long>(newest_at_join),
         after_s);
     evaluator.signal(SIGTERM);
-    EXPECT_EQ(evaluator.wait(30s), 0) << logs();
+    EXPECT_EQ(evaluator.wait(30s), 0) << logs(watch);
   }
 
   // With the actors stopped no new snapshot is published; an evaluator whose policy reader
   // gets no history must notice the announced version and re-request it.
   actor0->signal(SIGTERM);
   actor1->signal(SIGTERM);
-  ASSERT_EQ(actor0->wait(30s), 0) << logs();
-  ASSERT_EQ(actor1->wait(30s), 0) << logs();
+  ASSERT_EQ(actor0->wait(30s), 0) << logs(watch);
+  ASSERT_EQ(actor1->wait(30s), 0) << logs(watch);
   // The learner still does the updates it owes for the steps it got; after them it publishes
   // nothing new.
   std::uint64_t final_version = watch.newest_snapshot();
@@ -617,7 +633,7 @@ TEST_F(FaultTest, LateJoiningEvaluatorGetsTheNewestSnapshotAlsoThroughTheReReque
     }
     // Replay ratio 4 with 8 x 16 steps per update: all updates due are done.
     return testing::seconds_since(unchanged_since) > 3.0 && beat.updates >= beat.env_steps / 32;
-  })) << logs();
+  })) << logs(watch);
   const fs::path volatile_profile = volatile_policy_profile(dir_.path());
   ASSERT_FALSE(volatile_profile.empty()) << "single_host.xml has no policy_reader profile";
   const double requested_from = watch.now_s();
@@ -627,13 +643,13 @@ TEST_F(FaultTest, LateJoiningEvaluatorGetsTheNewestSnapshotAlsoThroughTheReReque
     const std::uint64_t version =
         evaluated_version(dir_.path() / "evaluator-volatile.log", std::chrono::seconds(60));
     const double after_s = testing::seconds_since(started);
-    EXPECT_EQ(version, final_version) << logs();
+    EXPECT_EQ(version, final_version) << logs(watch);
     std::printf(
         "[figures] late evaluator (no history, announce + re-request): v%llu %.2f s "
         "after its process started\n",
         static_cast<unsigned long long>(version), after_s);
     evaluator.signal(SIGTERM);
-    EXPECT_EQ(evaluator.wait(30s), 0) << logs();
+    EXPECT_EQ(evaluator.wait(30s), 0) << logs(watch);
   }
   // The learner republished the same version on request rather than a new one.
   const auto snapshots = watch.snapshots();
@@ -642,7 +658,7 @@ TEST_F(FaultTest, LateJoiningEvaluatorGetsTheNewestSnapshotAlsoThroughTheReReque
   }));
   EXPECT_EQ(watch.newest_snapshot(), final_version);
   learner->signal(SIGTERM);
-  ASSERT_EQ(learner->wait(60s), 0) << logs();
+  ASSERT_EQ(learner->wait(60s), 0) << logs(watch);
   const auto lines = metrics();
   ASSERT_FALSE(lines.empty());
   EXPECT_GE(lines.back().value("snapshot_requests", 0), 1) << lines.back().dump();
@@ -655,7 +671,7 @@ TEST_F(FaultTest, ActorsRejectForeignAndCorruptSnapshotsAndKeepRunning) {
   auto actor1 = start_actor(1);
   ASSERT_TRUE(wait_until(90s, [&] {
     return watch.min_newest_chunk_version({0, 1}) >= 2;
-  })) << logs();
+  })) << logs(watch);
 
   // A snapshot for another architecture and one with a bad checksum, both of this run and with
   // a version far above the learner's, so only the checks can keep the actors from taking it.
@@ -687,12 +703,12 @@ TEST_F(FaultTest, ActorsRejectForeignAndCorruptSnapshotsAndKeepRunning) {
       if (!watch.heartbeat(msg::ROLE_ACTOR, id, beat) || beat.dropped_messages < 2) return false;
     }
     return true;
-  })) << logs();
+  })) << logs(watch);
   ASSERT_TRUE(wait_until(60s, [&] {
     const auto version = watch.min_newest_chunk_version({0, 1});
     return version > newest && version < 1000000;
-  })) << logs();
-  EXPECT_TRUE(actor0->running() && actor1->running() && learner->running()) << logs();
+  })) << logs(watch);
+  EXPECT_TRUE(actor0->running() && actor1->running() && learner->running()) << logs(watch);
   for (const char* name : {"actor-0.log", "actor-1.log"}) {
     const std::string text = testing::slurp(dir_.path() / name);
     EXPECT_NE(text.find("does not match this actor's"), std::string::npos) << name;
@@ -701,8 +717,8 @@ TEST_F(FaultTest, ActorsRejectForeignAndCorruptSnapshotsAndKeepRunning) {
   writer.reset();
   actor0->signal(SIGTERM);
   actor1->signal(SIGTERM);
-  EXPECT_EQ(actor0->wait(30s), 0) << logs();
-  EXPECT_EQ(actor1->wait(30s), 0) << logs();
+  EXPECT_EQ(actor0->wait(30s), 0) << logs(watch);
+  EXPECT_EQ(actor1->wait(30s), 0) << logs(watch);
 }
 
 // An actor that hears nothing of its learner replaces its DDS participant every
@@ -717,16 +733,17 @@ void FaultTest::replaces_its_participant_until_a_late_learner_comes() {
   // long enough for an actor that had heard it to be replaced once more.
   auto actor0 = start_actor(0, {"actor.rejoin_after_s=3"});
   const auto rejoins = [&] { return participant_replacements(dir_.path() / "actor-0.log"); };
-  ASSERT_TRUE(wait_until(60s, [&] { return rejoins() >= 2; })) << logs();
-  ASSERT_TRUE(actor0->running()) << logs();
+  ASSERT_TRUE(wait_until(60s, [&] { return rejoins() >= 2; })) << logs(watch);
+  ASSERT_TRUE(actor0->running()) << logs(watch);
   EXPECT_TRUE(watch.chunks().empty()) << "no chunk without a learner's allowance";
 
   auto learner = start_learner();
-  ASSERT_TRUE(wait_until(90s, [&] { return watch.min_newest_chunk_version({0}) >= 1; })) << logs();
+  ASSERT_TRUE(wait_until(90s, [&] { return watch.min_newest_chunk_version({0}) >= 1; }))
+      << logs(watch);
   // With the learner heard (its heartbeat comes every 100 ms), no more replacements.
   const std::size_t joined_after = rejoins();
   std::this_thread::sleep_for(3s);
-  EXPECT_EQ(rejoins(), joined_after) << logs();
+  EXPECT_EQ(rejoins(), joined_after) << logs(watch);
   SeenHeartbeat beat;
   ASSERT_TRUE(watch.heartbeat(msg::ROLE_ACTOR, 0, beat));
   EXPECT_GE(beat.policy_version, 1u);
@@ -735,9 +752,9 @@ void FaultTest::replaces_its_participant_until_a_late_learner_comes() {
       profile_.filename().c_str(), joined_after);
 
   actor0->signal(SIGTERM);
-  EXPECT_EQ(actor0->wait(30s), 0) << logs();
+  EXPECT_EQ(actor0->wait(30s), 0) << logs(watch);
   learner->signal(SIGTERM);
-  EXPECT_EQ(learner->wait(60s), 0) << logs();
+  EXPECT_EQ(learner->wait(60s), 0) << logs(watch);
 }
 
 TEST_F(FaultTest, AnActorThatHearsNoLearnerReplacesItsParticipantAndJoinsALateLearner) {

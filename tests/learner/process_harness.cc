@@ -236,6 +236,35 @@ std::uint64_t ProcessWatch::min_newest_chunk_version(const std::vector<std::uint
   return actors.empty() ? 0 : low;
 }
 
+std::string ProcessWatch::describe() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::ostringstream text;
+  text.precision(2);
+  text << std::fixed << "watch at " << now_s() << " s: ";
+  if (snapshots_.empty()) {
+    text << "no snapshot";
+  } else {
+    const auto newest = std::max_element(
+        snapshots_.begin(), snapshots_.end(),
+        [](const SeenSnapshot& a, const SeenSnapshot& b) { return a.version < b.version; });
+    text << snapshots_.size() << " snapshots, newest v" << newest->version << " at "
+         << newest->time_s << " s";
+  }
+  std::map<std::uint32_t, const SeenChunk*> newest_chunk;
+  for (const auto& chunk : chunks_) newest_chunk[chunk.actor_id] = &chunk;
+  for (const auto& [actor, chunk] : newest_chunk) {
+    text << "; actor " << actor << " chunk #" << chunk->chunk_seq << " v" << chunk->policy_version
+         << " at " << chunk->time_s << " s";
+  }
+  static const char* const kRoles[] = {"learner", "actor", "evaluator", "launcher"};
+  for (const auto& [key, beat] : heartbeats_) {
+    text << "; heartbeat " << (key.first < 4 ? kRoles[key.first] : "role?") << " " << key.second
+         << " '" << beat.state << "' v" << beat.policy_version << " steps " << beat.env_steps
+         << " updates " << beat.updates << " at " << beat.time_s << " s";
+  }
+  return text.str();
+}
+
 std::string tiny_service_config() {
   return R"(preset: tiny
 run:

@@ -98,6 +98,9 @@ class ProcessWatch {
   // The lowest over `actors` of the newest policy version in their chunks (0 if one sent none).
   std::uint64_t min_newest_chunk_version(const std::vector<std::uint32_t>& actors);
   double now_s() const { return seconds_since(start_); }
+  // What the watch has seen, for a failing assertion's message: the newest snapshot, each
+  // actor's newest chunk and each process's newest heartbeat, with their times.
+  std::string describe();
   dds::Participant& participant() { return *participant_; }
   // With DDS Security, a handshake of this watch's participant pending for
   // dds::Participant::kHandshakeStallS never completes (seen in the two-host security test on
