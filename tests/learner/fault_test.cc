@@ -108,6 +108,11 @@ class FaultTest : public ::testing::Test {
   fs::path profile_ = testing::source_path("deploy/dds/single_host.xml");
 };
 
+// The watch's own view of both actors: after a learner is killed with SIGKILL the watch replaces
+// its participant if it stops hearing them (ProcessWatch::replace_if_unheard).
+const std::vector<std::pair<std::uint32_t, std::uint32_t>> kBothActors = {{msg::ROLE_ACTOR, 0},
+                                                                          {msg::ROLE_ACTOR, 1}};
+
 struct ActorRestart {
   std::uint32_t actor_id = 0;
   double after_s = 0.0;
@@ -398,6 +403,7 @@ TEST_F(FaultTest, LearnerKilledActorsWaitAndARestartedLearnerResumesFromItsCheck
   learner = start_learner(learner_overrides);
   double rejoin_s = -1.0;
   ASSERT_TRUE(wait_until(60s, [&] {
+    watch.replace_if_unheard(kBothActors, 10.0);
     if (watch.min_newest_chunk_version({0, 1}) <= published_before) return false;
     rejoin_s = watch.now_s() - restarted_at;
     return true;
@@ -509,6 +515,7 @@ TEST_F(FaultTest, LearnerKilledUnderLaunchIsRestartedAndResumes) {
   })) << logs(watch);
   const double respawned_s = watch.now_s() - killed_at;
   ASSERT_TRUE(wait_until(60s, [&] {
+    watch.replace_if_unheard(kBothActors, 10.0);
     return watch.min_newest_chunk_version({0, 1}) > published_before;
   })) << logs(watch);
   const double rejoined_s = watch.now_s() - killed_at;

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -173,6 +174,7 @@ void ProcessWatch::open() {
     std::lock_guard<std::mutex> lock(mutex_);
     heartbeats_[{static_cast<std::uint32_t>(beat.role()), beat.id()}] = seen;
   });
+  opened_s_ = now_s();  // when it is ready: making a participant takes a while
 }
 
 ProcessWatch::~ProcessWatch() { close(); }
@@ -189,6 +191,34 @@ bool ProcessWatch::replace_if_stalled() {
   close();
   open();
   ++replacements_;
+  return true;
+}
+
+bool ProcessWatch::replace_if_unheard(
+    const std::vector<std::pair<std::uint32_t, std::uint32_t>>& processes, double silent_s) {
+  const double now = now_s();
+  if (now - opened_s_ < silent_s) return false;
+  std::string why;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& key : processes) {
+      const auto it = heartbeats_.find(key);
+      if (it != heartbeats_.end() && now - it->second.time_s > silent_s) {
+        std::ostringstream text;
+        text.precision(2);
+        text << std::fixed << "role " << key.first << " id " << key.second << " unheard for "
+             << now - it->second.time_s << " s at " << now << " s";
+        why = text.str();
+        break;
+      }
+    }
+  }
+  if (why.empty()) return false;
+  close();
+  open();
+  ++replacements_;
+  replaced_why_ += (replaced_why_.empty() ? "" : "; ") + why;
+  std::fprintf(stderr, "[watch] replaced its participant: %s\n", why.c_str());
   return true;
 }
 
@@ -240,7 +270,11 @@ std::string ProcessWatch::describe() {
   std::lock_guard<std::mutex> lock(mutex_);
   std::ostringstream text;
   text.precision(2);
-  text << std::fixed << "watch at " << now_s() << " s: ";
+  text << std::fixed << "watch at " << now_s() << " s";
+  if (replacements_ > 0) {
+    text << " (participant replaced " << replacements_ << " times: " << replaced_why_ << ")";
+  }
+  text << ": ";
   if (snapshots_.empty()) {
     text << "no snapshot";
   } else {

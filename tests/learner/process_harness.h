@@ -109,6 +109,15 @@ class ProcessWatch {
   // its readers when one of its handshakes has stalled; what was seen is kept. Returns whether
   // it did. Call it while waiting.
   bool replace_if_stalled();
+  // On one host the SHM ports of a process killed with SIGKILL are reset by Fast DDS in every
+  // process that uses them, and the watch's own participant can come out of that deaf to
+  // processes that are running (suspected in a CI failure, 2026-12-06, where the actors stepped
+  // on for 60 s while the watch saw none of their newer chunks). Replaces the participant when
+  // one of `processes` (role, id), heard before, has sent no heartbeat for `silent_s` and the
+  // participant is older than that; the services heartbeat every 0.2 s in every state. Returns
+  // whether it did (counted in replacements() and shown by describe()). Call it while waiting.
+  bool replace_if_unheard(const std::vector<std::pair<std::uint32_t, std::uint32_t>>& processes,
+                          double silent_s);
   int replacements() const { return replacements_; }
 
  private:
@@ -117,6 +126,8 @@ class ProcessWatch {
 
   dds::ParticipantOptions options_;
   int replacements_ = 0;
+  double opened_s_ = 0.0;  // when the current participant was ready (watch seconds)
+  std::string replaced_why_;
   SteadyClock::time_point start_ = SteadyClock::now();
   std::unique_ptr<dds::Participant> participant_;
   std::unique_ptr<dds::Reader<msg::TrajectoryChunk>> chunk_reader_;
