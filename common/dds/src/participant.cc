@@ -152,7 +152,17 @@ void apply_discovery_server(eprosima::fastdds::dds::DomainParticipantQos& qos,
 
 int shared_memory_participant_id(long pid, int created_before) {
   INDRIVE_CHECK(pid >= 0 && created_before >= 0) << "pid " << pid << ", count " << created_before;
-  return static_cast<int>((pid + created_before) % kSharedMemoryParticipantIds);
+  // The pid is mixed first (splitmix64's finaliser): processes started one after another have
+  // consecutive pids, and with pid + count the second participant of one process (a rejoin)
+  // took the first one of the next (seen on 2026-12-06: actor 0's replacement took id 41, actor
+  // 1's, and the fault test's watch did not hear it for 10 s).
+  auto mixed = static_cast<std::uint64_t>(pid);
+  mixed = (mixed ^ (mixed >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  mixed = (mixed ^ (mixed >> 27)) * 0x94d049bb133111ebULL;
+  mixed ^= mixed >> 31;
+  return static_cast<int>(
+      (mixed % kSharedMemoryParticipantIds + static_cast<std::uint64_t>(created_before)) %
+      kSharedMemoryParticipantIds);
 }
 
 ServerAddress parse_discovery_server(const std::string& text, const std::string& source) {

@@ -127,9 +127,11 @@ inline constexpr int kSharedMemoryParticipantIds = 50;
 // (counted from 0). Fast DDS's automatic id is the lowest free one, so a process restarted
 // after a kill -9, or a participant recreated to rejoin, takes the port of the one that died;
 // a peer that had written to the dead port keeps its broken handle to it (it is marked not ok
-// and replaced under the peer's feet) and never reaches the new participant. Ids that move with
-// the pid and the count make that unlikely (a restarted process reuses the dead id in about 1
-// case of kSharedMemoryParticipantIds); Fast DDS moves a taken id on to the next free port.
+// and replaced under the peer's feet) and never reaches the new participant. Ids that start at
+// a hash of the pid and move with the count make that unlikely (a restarted process, or a
+// replacement in another process, takes a given earlier id in about 1 case of
+// kSharedMemoryParticipantIds; processes with consecutive pids do not follow each other's ids);
+// Fast DDS moves a taken id on to the next free port.
 int shared_memory_participant_id(long pid, int created_before);
 
 // Routes Fast DDS's log output to the project's log sink (category "fastdds"); idempotent.
