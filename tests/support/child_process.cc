@@ -2,9 +2,12 @@
 
 #include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
 #include <fstream>
 #include <iterator>
 #include <stdexcept>
@@ -29,13 +32,43 @@ Child::Child(std::vector<std::string> argv, const std::filesystem::path& log,
   for (auto& arg : argv) args.push_back(arg.data());
   args.push_back(nullptr);
 
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-  posix_spawn_file_actions_adddup2(&actions, 1, 2);
-  const int error = posix_spawn(&pid_, args[0], &actions, nullptr, args.data(), env_ptrs.data());
-  posix_spawn_file_actions_destroy(&actions);
-  if (error != 0) throw std::runtime_error("cannot start " + argv[0]);
+  // fork and exec instead of posix_spawn, to set PR_SET_PDEATHSIG: a test process that dies
+  // without running its destructors (ctest's timeout kills it) takes its children along instead
+  // of leaving a learner and actors training for the rest of the suite. Only async-signal-safe
+  // calls after the fork; an exec failure comes back through a close-on-exec pipe.
+  int exec_fds[2];
+  if (::pipe2(exec_fds, O_CLOEXEC) != 0) throw std::runtime_error("cannot start " + argv[0]);
+  const pid_t parent = ::getpid();
+  const std::string log_path = log.string();
+  pid_ = ::fork();
+  if (pid_ < 0) {
+    ::close(exec_fds[0]);
+    ::close(exec_fds[1]);
+    throw std::runtime_error("cannot start " + argv[0] + ": fork failed");
+  }
+  if (pid_ == 0) {
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (::getppid() != parent) ::_exit(127);  // the test died before prctl
+    const int fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    if (fd >= 0) {
+      ::dup2(fd, STDOUT_FILENO);
+      ::dup2(fd, STDERR_FILENO);
+      if (fd > STDERR_FILENO) ::close(fd);
+    }
+    ::execve(args[0], args.data(), env_ptrs.data());
+    const int error = errno;
+    [[maybe_unused]] const auto written = ::write(exec_fds[1], &error, sizeof error);
+    ::_exit(127);
+  }
+  ::close(exec_fds[1]);
+  int exec_error = 0;
+  const auto got = ::read(exec_fds[0], &exec_error, sizeof exec_error);
+  ::close(exec_fds[0]);
+  if (got == static_cast<ssize_t>(sizeof exec_error)) {
+    ::waitpid(pid_, nullptr, 0);
+    pid_ = -1;
+    throw std::runtime_error("cannot start " + argv[0] + ": " + std::strerror(exec_error));
+  }
 }
 
 Child::~Child() {

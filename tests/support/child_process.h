@@ -19,7 +19,9 @@ namespace indrive::testing {
 class Child {
  public:
   // Starts argv[0] (a path) with stdout and stderr appended to `log`, in this process's
-  // environment with `env` set on top; throws std::runtime_error if it cannot start.
+  // environment with `env` set on top; throws std::runtime_error if it cannot start. The child
+  // is killed when the test process dies (PR_SET_PDEATHSIG); create it in the thread that lives
+  // as long as it should (the signal goes when the creating thread ends).
   Child(std::vector<std::string> argv, const std::filesystem::path& log,
         const std::map<std::string, std::string>& env = {});
   ~Child();  // SIGKILLs and reaps a process still running
