@@ -55,11 +55,10 @@ class FaultTest : public ::testing::Test {
     return std::make_unique<Child>(argv, dir_.path() / ("actor-" + std::to_string(id) + ".log"));
   }
 
-  // Every log of the test directory and the launcher's run logs, for failure messages.
-  // Actor logs come first and each is cut to its last 4,000 characters, so that a failure
-  // message cut short by a CI log still shows the actors.
-  // The logs of the run, the learner's and the launcher's first (a long failure message is cut
-  // in the middle by CI), each without the environment's per-episode lines, which fill any cap.
+  // Every log of the test directory and the launcher's run logs, for failure messages: the
+  // learner's and the launcher's first (CI cuts a long failure message in the middle), then the
+  // actors', each without the environment's per-episode lines (counted) and cut to its last
+  // 4,000 characters.
   std::string logs() const {
     std::vector<fs::path> files;
     for (const fs::path& folder : {dir_.path(), run_dir_ / "logs"}) {

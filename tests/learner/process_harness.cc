@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -186,11 +187,17 @@ void ProcessWatch::close() {
   participant_.reset();
 }
 
-bool ProcessWatch::replace_if_stalled() {
-  if (participant_->peers().stalled == 0) return false;
+void ProcessWatch::replace(const std::string& why) {
   close();
   open();
   ++replacements_;
+  replaced_why_ += (replaced_why_.empty() ? "" : "; ") + why;
+  std::fprintf(stderr, "[watch] replaced its participant: %s\n", why.c_str());
+}
+
+bool ProcessWatch::replace_if_stalled() {
+  if (participant_->peers().stalled == 0) return false;
+  replace("a DDS Security handshake stalled");
   return true;
 }
 
@@ -214,11 +221,7 @@ bool ProcessWatch::replace_if_unheard(
     }
   }
   if (why.empty()) return false;
-  close();
-  open();
-  ++replacements_;
-  replaced_why_ += (replaced_why_.empty() ? "" : "; ") + why;
-  std::fprintf(stderr, "[watch] replaced its participant: %s\n", why.c_str());
+  replace(why);
   return true;
 }
 
@@ -292,9 +295,9 @@ std::string ProcessWatch::describe() {
   }
   static const char* const kRoles[] = {"learner", "actor", "evaluator", "launcher"};
   for (const auto& [key, beat] : heartbeats_) {
-    text << "; heartbeat " << (key.first < 4 ? kRoles[key.first] : "role?") << " " << key.second
-         << " '" << beat.state << "' v" << beat.policy_version << " steps " << beat.env_steps
-         << " updates " << beat.updates << " at " << beat.time_s << " s";
+    text << "; heartbeat " << (key.first < std::size(kRoles) ? kRoles[key.first] : "role?") << " "
+         << key.second << " '" << beat.state << "' v" << beat.policy_version << " steps "
+         << beat.env_steps << " updates " << beat.updates << " at " << beat.time_s << " s";
   }
   return text.str();
 }

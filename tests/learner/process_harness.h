@@ -111,8 +111,9 @@ class ProcessWatch {
   bool replace_if_stalled();
   // On one host the SHM ports of a process killed with SIGKILL are reset by Fast DDS in every
   // process that uses them, and the watch's own participant can come out of that deaf to
-  // processes that are running (suspected in a CI failure, 2026-12-06, where the actors stepped
-  // on for 60 s while the watch saw none of their newer chunks). Replaces the participant when
+  // processes that are running (seen on 2026-12-06: after a learner kill both actors replaced
+  // their participants, and the watch heard actor 0's new one only after replacing its own; a
+  // CI run failed so, the actors stepping on for 60 s). Replaces the participant when
   // one of `processes` (role, id), heard before, has sent no heartbeat for `silent_s` and the
   // participant is older than that; the services heartbeat every 0.2 s in every state. Returns
   // whether it did (counted in replacements() and shown by describe()). Call it while waiting.
@@ -123,6 +124,7 @@ class ProcessWatch {
  private:
   void open();
   void close();
+  void replace(const std::string& why);  // close, open, count and log it
 
   dds::ParticipantOptions options_;
   int replacements_ = 0;
