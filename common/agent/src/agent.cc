@@ -124,10 +124,10 @@ Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   nn::flush_denormals();
   wm_ = std::make_unique<WorldModel>(config_.world_model, rng_);
   intrinsic_ = make_intrinsic(config_.intrinsic, config_.world_model, rng_);
-  expl_ =
-      std::make_unique<ActorCritic>("expl", config_.behavior, config_.world_model.feat_dim(), rng_);
-  task_ =
-      std::make_unique<ActorCritic>("task", config_.behavior, config_.world_model.feat_dim(), rng_);
+  expl_ = std::make_unique<ActorCritic>("expl", config_.behavior, config_.world_model.feat_dim(),
+                                        rng_, config_.world_model.deter);
+  task_ = std::make_unique<ActorCritic>("task", config_.behavior, config_.world_model.feat_dim(),
+                                        rng_, config_.world_model.deter);
   const WorldModelConfig& w = config_.world_model;
   wm_opt_ = std::make_unique<nn::Adam>(wm_->params(),
                                        nn::AdamConfig{.lr = w.lr, .eps = w.eps, .clip = w.clip});

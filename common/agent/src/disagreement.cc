@@ -14,13 +14,15 @@ using namespace intrinsic_math;
 
 LatentDisagreement::LatentDisagreement(const IntrinsicConfig& config, const WorldModelConfig& model,
                                        nn::Rng& rng)
-    : IntrinsicModule(config), classes_(model.classes), units_(config.units) {
+    : IntrinsicModule(config), classes_(model.classes), units_(config.units), deter_(model.deter) {
   INDRIVE_CHECK(config.layers >= 1) << "the disagreement ensemble needs a hidden layer";
   for (int k = 0; k < config.ensemble; ++k) {
-    members_.emplace_back(
-        params_, "ld.member" + std::to_string(k), model.feat_dim() + kNumActions,
-        nn::MlpOptions{.units = config.units, .layers = config.layers, .out = model.stoch_dim()},
-        rng);
+    members_.emplace_back(params_, "ld.member" + std::to_string(k), model.feat_dim() + kNumActions,
+                          nn::MlpOptions{.units = config.units,
+                                         .layers = config.layers,
+                                         .out = model.stoch_dim(),
+                                         .one_hot_from = model.deter},
+                          rng);
   }
   make_optimizer();
 }
@@ -47,7 +49,8 @@ Tensor LatentDisagreement::stacked_first_weights() {
 std::vector<Tensor> LatentDisagreement::all_logits(Tensor input, Tensor stacked) {
   // One (N, in) x (in, K * units) product instead of K products of (in, units): the GEMM is K
   // times wider, which suits the kernels better than K narrow ones (and is one call, not K).
-  Tensor first = nn::matmul(input, stacked);
+  // The input is [deter, stoch, action]: the one-hot stoch and action pick rows of the weights.
+  Tensor first = nn::linear_one_hot_tail(input, stacked, Tensor(), deter_);
   std::vector<Tensor> logits;
   logits.reserve(members_.size());
   for (int k = 0; k < members(); ++k) {

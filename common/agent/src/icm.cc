@@ -17,7 +17,11 @@ Icm::Icm(const IntrinsicConfig& config, const WorldModelConfig& model, nn::Rng& 
       inverse_(params_, "icm.inverse", 2 * model.feat_dim(),
                {.units = config.units, .layers = config.layers, .out = kNumActions}, rng),
       forward_(params_, "icm.forward", model.feat_dim() + kNumActions,
-               {.units = config.units, .layers = config.layers, .out = model.feat_dim()}, rng),
+               {.units = config.units,
+                .layers = config.layers,
+                .out = model.feat_dim(),
+                .one_hot_from = model.deter},
+               rng),
       norm_(config.norm_rate, config.norm_eps) {
   make_optimizer();
 }

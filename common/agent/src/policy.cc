@@ -27,10 +27,12 @@ Policy::Policy(const AgentConfig& config)
   nn::Rng init(config.seed);
   wm_ = std::make_unique<WorldModel>(config_.world_model, init);
   // Same layer names and options as ActorCritic's actor, so snapshot groups load one to one.
-  actor_ = nn::Mlp(
-      actor_params_, "actor", config_.world_model.feat_dim(),
-      {.units = config_.behavior.units, .layers = config_.behavior.layers, .out = kNumActions},
-      init);
+  actor_ = nn::Mlp(actor_params_, "actor", config_.world_model.feat_dim(),
+                   {.units = config_.behavior.units,
+                    .layers = config_.behavior.layers,
+                    .out = kNumActions,
+                    .one_hot_from = config_.world_model.deter},
+                   init);
 }
 
 void Policy::load_snapshot(std::span<const std::uint8_t> snapshot) {

@@ -15,9 +15,17 @@ using namespace intrinsic_math;
 Rnd::Rnd(const IntrinsicConfig& config, const WorldModelConfig& model, nn::Rng& rng)
     : IntrinsicModule(config),
       target_(target_params_, "rnd.target", model.feat_dim(),
-              {.units = config.units, .layers = config.layers, .out = config.rnd_embed}, rng),
+              {.units = config.units,
+               .layers = config.layers,
+               .out = config.rnd_embed,
+               .one_hot_from = model.deter},
+              rng),
       predictor_(params_, "rnd.predictor", model.feat_dim(),
-                 {.units = config.units, .layers = config.layers, .out = config.rnd_embed}, rng),
+                 {.units = config.units,
+                  .layers = config.layers,
+                  .out = config.rnd_embed,
+                  .one_hot_from = model.deter},
+                 rng),
       norm_(config.norm_rate, config.norm_eps) {
   make_optimizer();
 }

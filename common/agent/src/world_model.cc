@@ -14,7 +14,7 @@ WorldModel::WorldModel(const WorldModelConfig& config, nn::Rng& rng) : config_(c
       .image = config.image, .channels = config.channels, .depth = config.cnn_depth, .min_res = 4};
   encoder_ = nn::ConvEncoder(params_, "enc", conv, rng);
   img_in_ = nn::Linear(params_, "rssm.img_in", stoch_dim + kNumActions, config.units,
-                       nn::LinearOptions{.bias = false}, rng);
+                       nn::LinearOptions{.bias = false, .one_hot_from = 0}, rng);
   img_in_norm_ = nn::LayerNorm(params_, "rssm.img_in.norm", config.units);
   gru_ = nn::GruCell(params_, "rssm.gru", config.units, config.deter, rng);
   prior_head_ = nn::Mlp(params_, "rssm.prior", config.deter,
@@ -22,15 +22,22 @@ WorldModel::WorldModel(const WorldModelConfig& config, nn::Rng& rng) : config_(c
   post_head_ = nn::Mlp(params_, "rssm.post", config.deter + encoder_.embed_dim(),
                        {.units = config.units, .layers = 1, .out = stoch_dim}, rng);
   initial_ = &params_.add("rssm.initial", Shape{1, config.deter});
-  decoder_ = nn::ConvDecoder(params_, "dec", config.feat_dim(), conv, rng);
-  cont_head_ = nn::Mlp(params_, "cont", config.feat_dim(),
-                       {.units = config.units, .layers = config.head_layers, .out = 1}, rng);
+  // Features are [deter, stoch] and stoch is one-hot (a sample or a mode): the layers reading
+  // features gather their stoch rows (linear_one_hot_tail), as img_in does for [stoch, action].
+  nn::ConvStackOptions dec = conv;
+  dec.one_hot_from = config.deter;
+  decoder_ = nn::ConvDecoder(params_, "dec", config.feat_dim(), dec, rng);
+  cont_head_ = nn::Mlp(
+      params_, "cont", config.feat_dim(),
+      {.units = config.units, .layers = config.head_layers, .out = 1, .one_hot_from = config.deter},
+      rng);
   // Zero output weights make the first reward predictions exactly 0 (DreamerV3).
   reward_head_ = nn::Mlp(reward_params_, "reward", config.feat_dim(),
                          {.units = config.units,
                           .layers = config.head_layers,
                           .out = nn::kTwoHotBins,
-                          .out_init = nn::Init::kZeros},
+                          .out_init = nn::Init::kZeros,
+                          .one_hot_from = config.deter},
                          rng);
 }
 

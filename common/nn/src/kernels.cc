@@ -372,6 +372,22 @@ bool bf16_supported() {
 #endif
 }
 
+namespace {
+std::atomic<bool> g_gather_one_hot{true};
+}  // namespace
+
+void set_gather_one_hot(bool on) { g_gather_one_hot = on; }
+bool gather_one_hot() { return g_gather_one_hot.load(std::memory_order_relaxed); }
+
+bool one_hot_scan_vectorised() {
+#if defined(__x86_64__)
+  static const bool vectorised = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi");
+  return vectorised;
+#else
+  return false;
+#endif
+}
+
 Precision resolve_precision(std::string_view text) {
   if (text == "fp32") return Precision::kFp32;
   if (text == "auto") return bf16_supported() ? Precision::kBf16 : Precision::kFp32;
@@ -415,6 +431,8 @@ std::string kernel_report() {
 #else
   out += "Eigen GEMM (built without oneDNN); products fp32";
 #endif
+  out += one_hot_scan_vectorised() ? "; one-hot inputs scanned with AVX2"
+                                   : "; one-hot inputs scanned one column at a time (no AVX2)";
   return out;
 }
 

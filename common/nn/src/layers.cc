@@ -44,7 +44,9 @@ void init_trunc_normal(Parameter& p, std::int64_t fan_in, std::int64_t fan_out, 
 
 Linear::Linear(ParamGroup& group, const std::string& name, int in, int out, LinearOptions options,
                Rng& rng)
-    : in_(in), out_(out) {
+    : in_(in), out_(out), one_hot_from_(options.one_hot_from) {
+  INDRIVE_CHECK(one_hot_from_ <= in)
+      << name << ": one-hot columns from " << one_hot_from_ << " of an input with " << in;
   w_ = &group.add(name + ".w", Shape{in, out});
   if (options.init == Init::kTruncNormal) init_trunc_normal(*w_, in, out, options.scale, rng);
   if (options.bias) b_ = &group.add(name + ".b", Shape{out});
@@ -52,7 +54,9 @@ Linear::Linear(ParamGroup& group, const std::string& name, int in, int out, Line
 
 Tensor Linear::operator()(Tensor x) const {
   INDRIVE_CHECK(w_ != nullptr) << "Linear used before construction";
-  return linear(x, w_->tensor(), b_ ? b_->tensor() : Tensor());
+  const Tensor b = b_ ? b_->tensor() : Tensor();
+  if (one_hot_from_ >= 0) return linear_one_hot_tail(x, w_->tensor(), b, one_hot_from_);
+  return linear(x, w_->tensor(), b);
 }
 
 Tensor Linear::weight() const {
@@ -86,14 +90,19 @@ Mlp::Mlp(ParamGroup& group, const std::string& name, int in, MlpOptions options,
   int dim = in;
   for (int i = 0; i < options.layers; ++i) {
     const std::string layer = name + ".h" + std::to_string(i);
-    hidden_.emplace_back(group, layer, dim, options.units, LinearOptions{.bias = !options.norm},
-                         rng);
+    hidden_.emplace_back(
+        group, layer, dim, options.units,
+        LinearOptions{.bias = !options.norm, .one_hot_from = i == 0 ? options.one_hot_from : -1},
+        rng);
     if (options.norm) norms_.emplace_back(group, layer + ".norm", options.units);
     dim = options.units;
   }
   if (options.out > 0)
     out_ = Linear(group, name + ".out", dim, options.out,
-                  LinearOptions{.bias = true, .init = options.out_init, .scale = options.out_scale},
+                  LinearOptions{.bias = true,
+                                .init = options.out_init,
+                                .scale = options.out_scale,
+                                .one_hot_from = options.layers == 0 ? options.one_hot_from : -1},
                   rng);
 }
 
@@ -192,7 +201,7 @@ ConvDecoder::ConvDecoder(ParamGroup& group, const std::string& name, int in,
   const int stages = num_stages(options);
   top_channels_ = options.depth << (stages - 1);
   in_ = Linear(group, name + ".in", in, options.min_res * options.min_res * top_channels_,
-               LinearOptions{}, rng);
+               LinearOptions{.one_hot_from = options.one_hot_from}, rng);
   int c = top_channels_;
   for (int i = 0; i < stages; ++i) {
     const bool last = i == stages - 1;

@@ -3,6 +3,7 @@
 // actor-critic) for a preset, and where the agent update's time goes by stage.
 // Usage: common_agent_bench [--preset tiny|cpu|small] [--threads N] [--iters N] [--method disag]
 //                           [--precision auto|fp32|bf16] [--kernels onednn|eigen]
+//                           [--one-hot gather|dense]
 //                           [--torch PATH/torch_agent_step.py]
 //                           [--set agent.KEY=VALUE ...]  (e.g. --set replay.length=16)
 // Prints, per stage and in total, seconds, the matrix-product FLOPs (nn::gemm_flops) and
@@ -136,6 +137,7 @@ double torch_reference(const std::string& script, const std::string& preset, int
 int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // figures survive a run cut short
   std::string preset = "tiny", method = "disag", precision = "auto", kernels = "onednn", torch;
+  std::string one_hot = "gather";
   std::vector<std::string> sets;
   int threads = 2, iters = 5;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -152,6 +154,8 @@ int main(int argc, char** argv) {
       precision = argv[i + 1];
     else if (key == "--kernels")
       kernels = argv[i + 1];
+    else if (key == "--one-hot")
+      one_hot = argv[i + 1];
     else if (key == "--torch")
       torch = argv[i + 1];
     else if (key == "--set")
@@ -169,6 +173,9 @@ int main(int argc, char** argv) {
     if (kernels != "onednn" && kernels != "eigen")
       throw std::runtime_error("--kernels wants onednn or eigen, got " + kernels);
     nn::set_use_onednn(kernels == "onednn");
+    if (one_hot != "gather" && one_hot != "dense")
+      throw std::runtime_error("--one-hot wants gather or dense, got " + one_hot);
+    nn::set_gather_one_hot(one_hot == "gather");
     // The product peaks of this run: fp32, and bf16 where the CPU has it.
     nn::set_precision(nn::Precision::kFp32);
     const double peak_fp32 = product_peak();
@@ -190,7 +197,8 @@ int main(int argc, char** argv) {
     indrive::agent::Agent agent(config);
     if (!nn::use_onednn() && nn::precision() == nn::Precision::kBf16)
       throw std::runtime_error("--kernels eigen runs fp32 only: add --precision fp32");
-    std::printf("%s\n", nn::kernel_report().c_str());
+    std::printf("%s%s\n", nn::kernel_report().c_str(),
+                nn::gather_one_hot() ? "" : " (off: dense products, --one-hot dense)");
     std::printf("product_peak fp32_gflops=%.0f bf16_gflops=%.0f\n", peak_fp32, peak_bf16);
     const SequenceBatch batch = random_batch(config, 1);
     const double frames = static_cast<double>(batch.batch) * batch.length;

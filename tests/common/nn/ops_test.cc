@@ -1,6 +1,7 @@
 // Every op: values against direct formulas, gradients against central finite differences.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -55,6 +56,95 @@ TEST_F(OpsTest, MatmulValuesMatchLoops) {
       for (int k = 0; k < 4; ++k) expect += x.value()[r * 4 + k] * w.value()[k * 5 + c];
       EXPECT_NEAR(y.data()[r * 5 + c], expect, 1e-5f);
     }
+}
+
+// linear_one_hot_tail against linear on the same input: x is `dense` random columns, then
+// `groups` one-hot blocks of `classes`, then an action block of 9 that is all zeros in every
+// fifth row (no action yet). Returns the largest difference over the values and the gradients
+// of x, w and b (a weighted sum of the output as the loss).
+class OneHotTailTest : public OpsTest {
+ protected:
+  float largest_difference(std::int64_t rows, int dense, int groups, int classes, std::int64_t cols,
+                           std::int64_t from) {
+    const int k = dense + groups * classes + 9;
+    const std::string at = std::to_string(calls_++);
+    Parameter& x = input("x" + at, {rows, k});
+    Parameter& w = input("w" + at, {k, cols});
+    Parameter& b = input("b" + at, {cols});
+    Parameter& r = input("r" + at, {rows, cols});
+    std::span<float> xv = x.value();
+    for (std::int64_t i = 0; i < rows; ++i) {
+      float* row = xv.data() + i * k;
+      std::fill(row + dense, row + k, 0.0f);
+      for (int g = 0; g < groups; ++g) row[dense + g * classes + (i * 7 + g * 3) % classes] = 1.0f;
+      if (i % 5 != 0) row[dense + groups * classes + i % 9] = 1.0f;
+    }
+    auto run = [&](bool gather) {
+      current_graph().reset();
+      in_.zero_grad();
+      Tensor y = gather ? linear_one_hot_tail(x.tensor(), w.tensor(), b.tensor(), from)
+                        : linear(x.tensor(), w.tensor(), b.tensor());
+      current_graph().backward(sum(mul(y, stop_gradient(r.tensor()))));
+      std::vector<float> out(y.data(), y.data() + y.numel());
+      for (Parameter* p : {&x, &w, &b}) out.insert(out.end(), p->grad().begin(), p->grad().end());
+      return out;
+    };
+    const std::vector<float> dense_run = run(false), gathered = run(true);
+    EXPECT_EQ(dense_run.size(), gathered.size());
+    float worst = 0;
+    for (std::size_t i = 0; i < dense_run.size(); ++i)
+      worst = std::max(worst, std::fabs(dense_run[i] - gathered[i]));
+    return worst;
+  }
+  int calls_ = 0;
+};
+
+TEST_F(OneHotTailTest, GathersTheSameValuesAndGradientsAsTheProduct) {
+  // A model state [deter, stoch] + action: dense part, then one-hot columns.
+  EXPECT_LT(largest_difference(37, 8, 3, 8, 70, 8), 1e-4f);
+  // [stoch, action] (the RSSM's input): one-hot from the first column.
+  EXPECT_LT(largest_difference(21, 0, 4, 4, 5, 0), 1e-4f);
+  // A tail that starts inside the dense part: those columns are taken as dense (they hold
+  // neither only zeros nor only ones), so the op runs the plain product.
+  EXPECT_LT(largest_difference(11, 6, 2, 8, 9, 3), 1e-4f);
+  // No one-hot columns at all (from = k).
+  EXPECT_LT(largest_difference(9, 4, 1, 4, 6, 4 + 4 + 9), 1e-4f);
+}
+
+TEST_F(OneHotTailTest, LargeInputsSplitOverThreadsMatchTheProduct) {
+  // Enough rows and columns that the gather (rows) and the weight gradient (column blocks)
+  // run in parallel with two threads.
+  const int saved = threads();
+  set_threads(2);
+  EXPECT_LT(largest_difference(700, 64, 8, 16, 200, 64), 2e-3f);
+  set_threads(saved);
+}
+
+TEST_F(OneHotTailTest, ATailThatIsNotOneHotIsMultipliedNotGathered) {
+  Parameter& x = input("x", {4, 6});
+  Parameter& w = input("w", {6, 3});
+  std::span<float> xv = x.value();
+  std::fill(xv.begin(), xv.end(), 0.0f);
+  xv[0] = 0.25f;  // dense column
+  xv[2] = 1.0f;
+  xv[9] = 0.5f;  // row 1, column 3: in the "one-hot" tail, but a probability
+  xv[16] = 1.0f;
+  const Tensor expect = linear(x.tensor(), w.tensor());
+  const Tensor got = linear_one_hot_tail(x.tensor(), w.tensor(), Tensor(), 2);
+  for (int i = 0; i < 12; ++i) EXPECT_NEAR(got.data()[i], expect.data()[i], 1e-6f) << i;
+}
+
+TEST_F(OneHotTailTest, GradientsMatchFiniteDifferencesOfTheWeights) {
+  Parameter& w = input("w", {10, 4});
+  Parameter& b = input("b", {4});
+  const std::vector<float> x = {0.3f,  -0.7f, 0, 1, 0, 0, 0, 1, 0, 0,  //
+                                1.2f,  0.1f,  1, 0, 0, 0, 0, 0, 0, 1,  //
+                                -0.4f, 0.9f,  0, 0, 1, 0, 0, 0, 0, 0};
+  EXPECT_EQ(check("linear_one_hot_tail",
+                  [&] {
+                    return linear_one_hot_tail(constant({3, 10}, x), w.tensor(), b.tensor(), 2);
+                  }),
+            0);
 }
 
 TEST_F(OpsTest, BinaryOpsBroadcastValues) {

@@ -57,7 +57,10 @@ struct BehaviorMetrics {
 // Groups: "<prefix>_actor", "<prefix>_critic", "<prefix>_slow_critic".
 class ActorCritic {
  public:
-  ActorCritic(const std::string& prefix, const BehaviorConfig& config, int feat_dim, nn::Rng& rng);
+  // Features are (N, feat_dim); where their columns from `one_hot_from` on are one-hot (a world
+  // model's [deter, stoch], one_hot_from = deter), the first layers gather instead of multiply.
+  ActorCritic(const std::string& prefix, const BehaviorConfig& config, int feat_dim, nn::Rng& rng,
+              int one_hot_from = -1);
   ActorCritic(const ActorCritic&) = delete;
   ActorCritic& operator=(const ActorCritic&) = delete;
 

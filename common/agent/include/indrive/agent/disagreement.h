@@ -37,6 +37,7 @@ class LatentDisagreement : public IntrinsicModule {
 
   int classes_;
   int units_;
+  int deter_;  // the input [deter, stoch, action] is one-hot from this column on
   std::vector<nn::Mlp> members_;
 };
 

@@ -33,6 +33,15 @@ std::string_view to_string(Precision p);
 // an AMX level; ONEDNN_MAX_CPU_ISA lowers it). Always false in a build without oneDNN.
 bool bf16_supported();
 
+// True where linear_one_hot_tail finds an input's ones eight columns at a time (AVX2, checked
+// at run time); elsewhere it scans one column at a time.
+bool one_hot_scan_vectorised();
+
+// Whether linear_one_hot_tail gathers (the default) or runs the dense product like linear();
+// for benchmarks that compare the two.
+void set_gather_one_hot(bool on);
+bool gather_one_hot();
+
 // "fp32" and "bf16" as such; "auto" is bf16 where bf16_supported(), else fp32. Throws
 // PrecisionError for any other text, and for "bf16" on a CPU without native bf16, saying what
 // to set instead.
@@ -42,8 +51,8 @@ void set_precision(Precision p);
 Precision precision();
 
 // One line for the log: the kernel library and its version, the CPU ISA it runs, and the
-// precision of the products, e.g. "kernels: oneDNN 2.6.3 on avx512_core_amx; products bf16
-// (AMX)".
+// precision of the products and the one-hot scan, e.g. "kernels: oneDNN 2.6.3 on
+// avx512_core_amx; products bf16 on AMX tiles (...); one-hot inputs scanned with AVX2".
 std::string kernel_report();
 
 // Whether products go to oneDNN (true where built with it) or stay on Eigen; for benchmarks

@@ -33,6 +33,10 @@ struct LinearOptions {
   bool bias = true;  // DreamerV3 drops the bias when a norm follows
   Init init = Init::kTruncNormal;
   float scale = 1.0f;
+  // The input's columns from this one on hold one-hot blocks (a model state's stochastic part,
+  // an action): the layer gathers their rows of w instead of multiplying
+  // (linear_one_hot_tail). -1: a dense input.
+  int one_hot_from = -1;
 };
 
 // y = x * w + b. w is (in, out), b is (out).
@@ -51,6 +55,7 @@ class Linear {
 
  private:
   int in_ = 0, out_ = 0;
+  int one_hot_from_ = -1;
   Parameter* w_ = nullptr;
   Parameter* b_ = nullptr;
 };
@@ -82,6 +87,7 @@ struct MlpOptions {
   int out = 0;                         // 0: no output layer; the result is the last hidden layer
   Init out_init = Init::kTruncNormal;  // kZeros for reward and critic heads
   float out_scale = 1.0f;
+  int one_hot_from = -1;  // the first layer's LinearOptions::one_hot_from
 };
 
 // Multi-layer perceptron as in DreamerV3.
@@ -138,6 +144,7 @@ struct ConvStackOptions {
   int depth = 16;    // channels of the first conv
   int min_res = 4;   // resolution of the deepest feature map
   Act act = Act::kSilu;
+  int one_hot_from = -1;  // decoder: its features' one-hot columns (LinearOptions::one_hot_from)
 };
 
 // Image encoder: (N, image, image, channels) -> (N, embed_dim()).

@@ -20,6 +20,13 @@ namespace indrive::nn {
 Tensor matmul(Tensor a, Tensor b);
 // x * w + bias. x is (..., in); w is (in, out); bias is (out) or undefined; result (..., out).
 Tensor linear(Tensor x, Tensor w, Tensor bias = {});
+// linear(x, w, bias) for an x whose columns from `one_hot_from` on hold only zeros and ones
+// (the one-hot latents and actions after a model state's dense part): those columns' share of
+// the product is a sum of the rows of w they pick, so it is gathered, not multiplied, and their
+// share of w's gradient is scattered the same way. The same function as linear(); the result
+// differs from it only by the order of additions (and, with bf16 products, by the picked rows
+// staying fp32). When the columns hold anything else it runs linear() itself.
+Tensor linear_one_hot_tail(Tensor x, Tensor w, Tensor bias, std::int64_t one_hot_from);
 
 // ---- Elementwise binary ops with broadcasting of the (rows, cols) views ----
 
