@@ -374,6 +374,7 @@ bool bf16_supported() {
 
 namespace {
 std::atomic<bool> g_gather_one_hot{true};
+std::atomic<bool> g_one_hot_scan_allowed{true};
 }  // namespace
 
 void set_gather_one_hot(bool on) { g_gather_one_hot = on; }
@@ -382,11 +383,13 @@ bool gather_one_hot() { return g_gather_one_hot.load(std::memory_order_relaxed);
 bool one_hot_scan_vectorised() {
 #if defined(__x86_64__)
   static const bool vectorised = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi");
-  return vectorised;
+  return vectorised && g_one_hot_scan_allowed.load(std::memory_order_relaxed);
 #else
   return false;
 #endif
 }
+
+void set_one_hot_scan_vectorised(bool allowed) { g_one_hot_scan_allowed = allowed; }
 
 Precision resolve_precision(std::string_view text) {
   if (text == "fp32") return Precision::kFp32;
@@ -432,7 +435,7 @@ std::string kernel_report() {
   out += "Eigen GEMM (built without oneDNN); products fp32";
 #endif
   out += one_hot_scan_vectorised() ? "; one-hot inputs scanned with AVX2"
-                                   : "; one-hot inputs scanned one column at a time (no AVX2)";
+                                   : "; one-hot inputs scanned one column at a time";
   return out;
 }
 

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "grad_check.h"
+#include "indrive/nn/kernels.h"
 #include "indrive/nn/nn.h"
 
 namespace indrive::nn {
@@ -102,6 +103,10 @@ class OneHotTailTest : public OpsTest {
 TEST_F(OneHotTailTest, GathersTheSameValuesAndGradientsAsTheProduct) {
   // A model state [deter, stoch] + action: dense part, then one-hot columns.
   EXPECT_LT(largest_difference(37, 8, 3, 8, 70, 8), 1e-4f);
+  // The same with the scan that reads one column at a time (CPUs without AVX2).
+  set_one_hot_scan_vectorised(false);
+  EXPECT_LT(largest_difference(37, 8, 3, 8, 70, 8), 1e-4f);
+  set_one_hot_scan_vectorised(true);
   // [stoch, action] (the RSSM's input): one-hot from the first column.
   EXPECT_LT(largest_difference(21, 0, 4, 4, 5, 0), 1e-4f);
   // A tail that starts inside the dense part: those columns are taken as dense (they hold
@@ -121,17 +126,27 @@ TEST_F(OneHotTailTest, LargeInputsSplitOverThreadsMatchTheProduct) {
 }
 
 TEST_F(OneHotTailTest, ATailThatIsNotOneHotIsMultipliedNotGathered) {
-  Parameter& x = input("x", {4, 6});
-  Parameter& w = input("w", {6, 3});
-  std::span<float> xv = x.value();
-  std::fill(xv.begin(), xv.end(), 0.0f);
-  xv[0] = 0.25f;  // dense column
-  xv[2] = 1.0f;
-  xv[9] = 0.5f;  // row 1, column 3: in the "one-hot" tail, but a probability
-  xv[16] = 1.0f;
-  const Tensor expect = linear(x.tensor(), w.tensor());
-  const Tensor got = linear_one_hot_tail(x.tensor(), w.tensor(), Tensor(), 2);
-  for (int i = 0; i < 12; ++i) EXPECT_NEAR(got.data()[i], expect.data()[i], 1e-6f) << i;
+  // 18 tail columns: two blocks of eight for the vector scan and two for its scalar end. A
+  // probability in either part must make the product dense (a gather would read it as 0).
+  Parameter& w = input("w", {20, 3});
+  for (int bad_column : {5, 12, 19}) {
+    Parameter& x = input("x" + std::to_string(bad_column), {4, 20});
+    std::span<float> xv = x.value();
+    std::fill(xv.begin(), xv.end(), 0.0f);
+    for (int i = 0; i < 4; ++i) {
+      xv[i * 20] = 0.25f * static_cast<float>(i + 1);  // dense columns 0-1
+      xv[i * 20 + 2 + i] = 1.0f;
+    }
+    xv[20 + bad_column] = 0.5f;  // row 1
+    const Tensor expect = linear(x.tensor(), w.tensor());
+    for (bool vectorised : {true, false}) {
+      set_one_hot_scan_vectorised(vectorised);
+      const Tensor got = linear_one_hot_tail(x.tensor(), w.tensor(), Tensor(), 2);
+      for (int i = 0; i < 12; ++i)
+        EXPECT_NEAR(got.data()[i], expect.data()[i], 1e-6f) << bad_column << " " << i;
+    }
+    set_one_hot_scan_vectorised(true);
+  }
 }
 
 TEST_F(OneHotTailTest, GradientsMatchFiniteDifferencesOfTheWeights) {

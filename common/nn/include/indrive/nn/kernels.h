@@ -34,8 +34,10 @@ std::string_view to_string(Precision p);
 bool bf16_supported();
 
 // True where linear_one_hot_tail finds an input's ones eight columns at a time (AVX2, checked
-// at run time); elsewhere it scans one column at a time.
+// at run time); elsewhere it scans one column at a time. set_one_hot_scan_vectorised(false)
+// takes the one-column path on any CPU (for tests of that path); true restores the check.
 bool one_hot_scan_vectorised();
+void set_one_hot_scan_vectorised(bool allowed);
 
 // Whether linear_one_hot_tail gathers (the default) or runs the dense product like linear();
 // for benchmarks that compare the two.
