@@ -97,9 +97,28 @@ double product_peak() {
   return best;
 }
 
+// PyTorch's fp32 product rate at `threads` threads (GFLOP/s of a 1024 x 1024 x 1024 matmul), or a
+// negative value when it cannot be measured. Debian's python3-torch multiplies through the
+// system BLAS: with only the reference BLAS installed that is 5-6 GFLOP/s on this project's
+// development machine, 140 with libopenblas0-pthread, and the reference's figures follow.
+double torch_gemm_gflops(const std::string& python, int threads) {
+  const std::string cmd =
+      python + " -c 'import time, torch; torch.set_num_threads(" + std::to_string(threads) +
+      "); a = torch.randn(1024, 1024); b = torch.randn(1024, 1024); [a @ b for _ in range(3)]; "
+      "t = time.perf_counter(); [a @ b for _ in range(10)]; "
+      "print(2 * 1024 ** 3 * 10 / (time.perf_counter() - t) / 1e9)' 2>/dev/null";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return -1;
+  char buf[256] = {0};
+  const bool got = std::fgets(buf, sizeof buf, pipe) != nullptr;
+  return pclose(pipe) == 0 && got ? std::atof(buf) : -1;
+}
+
 // Runs the PyTorch reference; its seconds per update, or a negative value (and why, on stderr).
-double torch_reference(const std::string& script, const std::string& preset, int threads,
-                       int iters) {
+// Prints PyTorch's product rate beside this engine's fp32 peak first, and a warning where it is
+// under a tenth of it (a reference BLAS makes every ratio below meaningless).
+double torch_reference(const std::string& script, const std::string& preset, int threads, int iters,
+                       double our_fp32_peak) {
   // Debian's python3-torch is installed for the system interpreter, which another python3
   // earlier on PATH may hide.
   std::string python;
@@ -114,6 +133,15 @@ double torch_reference(const std::string& script, const std::string& preset, int
                  "torch reference skipped: python3 cannot import torch "
                  "(apt-get install python3-torch)\n");
     return -1;
+  }
+  const double gemm = torch_gemm_gflops(python, threads);
+  std::printf("torch_gemm fp32_gflops=%.0f (this engine's fp32 peak %.0f)\n", gemm, our_fp32_peak);
+  if (gemm >= 0 && gemm < 0.1 * our_fp32_peak) {
+    std::printf(
+        "torch_warning: PyTorch multiplies at %.0f GFLOP/s, under a tenth of this engine's "
+        "fp32 peak: its BLAS is probably the reference one (apt-get install "
+        "libopenblas0-pthread), so the ratio below compares against a slowed PyTorch\n",
+        gemm);
   }
   const std::string cmd = python + " '" + script + "' --preset " + preset + " --threads " +
                           std::to_string(threads) + " --iters " + std::to_string(iters) + " 2>&1";
@@ -275,7 +303,8 @@ int main(int argc, char** argv) {
         "agent_update_total gflop=%.1f gflops=%.0f of_fp32_peak=%.0f%% of_bf16_peak=%.0f%%\n",
         flops_sum / 1e9, rate, 100 * rate / peak_fp32, peak_bf16 > 0 ? 100 * rate / peak_bf16 : 0);
     if (!torch.empty()) {
-      const double ref = torch_reference(torch, preset, threads, std::max(2, std::min(iters, 3)));
+      const double ref =
+          torch_reference(torch, preset, threads, std::max(2, std::min(iters, 3)), peak_fp32);
       if (ref > 0)
         std::printf("torch_ratio torch_sec=%.3f ours_sec=%.3f speedup=%.1fx\n", ref, full,
                     ref / full);
