@@ -9,7 +9,8 @@
 // Prints, per stage and in total, seconds, the matrix-product FLOPs (nn::gemm_flops) and
 // GFLOP/s, against the fp32 and bf16 product peaks measured in the same run. With --torch, and
 // where python3 imports torch, also runs that PyTorch reference on the same preset and thread
-// count and prints the ratio of the two.
+// count and prints the ratio of the two, after PyTorch's own product rate (it needs an
+// optimised BLAS such as libopenblas0-pthread: the bench warns when it runs on a slow one).
 #include <sys/resource.h>
 
 #include <algorithm>
