@@ -24,6 +24,8 @@ namespace {
 
 std::atomic<Precision> g_precision{Precision::kFp32};
 std::atomic<bool> g_use_onednn{INDRIVE_WITH_ONEDNN != 0};
+std::atomic<bool> g_gather_one_hot{true};        // linear_one_hot_tail gathers
+std::atomic<bool> g_one_hot_scan_allowed{true};  // its AVX2 scan, where the CPU has it
 std::atomic<std::uint64_t> g_flops{0};
 // Bumped by every Graph::reset() and rewind(): kept bf16 copies of graph values older than the
 // current generation are stale.
@@ -371,11 +373,6 @@ bool bf16_supported() {
   return false;
 #endif
 }
-
-namespace {
-std::atomic<bool> g_gather_one_hot{true};
-std::atomic<bool> g_one_hot_scan_allowed{true};
-}  // namespace
 
 void set_gather_one_hot(bool on) { g_gather_one_hot = on; }
 bool gather_one_hot() { return g_gather_one_hot.load(std::memory_order_relaxed); }

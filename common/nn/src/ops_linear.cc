@@ -65,7 +65,7 @@ Tensor linear_impl(Tensor x, Tensor w, Tensor bias) {
 //
 // n.saved holds x's first `from` columns as a contiguous (m, from) matrix (the dense product's
 // operand, kept for the weight gradient), then the tail's ones as rows: m + 1 row offsets and
-// the column of every one (int32, in float-sized slots). iparam: m, k, cols, from, ones.
+// the column of every one (int32, in float-sized slots). iparam: m, k, cols, from.
 
 struct OneHotTail {
   const float* dense;
@@ -240,7 +240,6 @@ Tensor linear_one_hot_tail(Tensor x, Tensor w, Tensor bias, std::int64_t one_hot
   n->iparam[1] = k;
   n->iparam[2] = cols;
   n->iparam[3] = from;
-  n->iparam[4] = static_cast<std::int64_t>(ones.size());
   auto y = mat(n->value, m, cols);
   if (from > 0) {
     GemmOperand a = operand(cmat(dense, m, from));
