@@ -5,6 +5,7 @@
 #include <random>
 #include <thread>
 
+#include "indrive/actor/allowance_gate.h"
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/env_adapter.h"
 #include "indrive/actor/protocol_record.h"
@@ -30,64 +31,6 @@ double seconds_since(Clock::time_point start) {
 double unix_time_s() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
-
-// The learner's pacing as this actor knows it. The allowance caps the total steps of all
-// actors; the learner's heartbeat says how many it has received, and this actor adds the steps
-// it took since that heartbeat arrived, so several actors overshoot by at most their in-flight
-// steps.
-class AllowanceGate {
- public:
-  explicit AllowanceGate(std::string run_id) : run_id_(std::move(run_id)) {}
-
-  void on_allowance(const msg::StepAllowance& allowance) {
-    if (dds::validate(allowance, run_id_) != dds::DropReason::kOk) return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    last_heard_ = Clock::now();
-    allowed_ = allowance.total_env_steps();
-    have_allowance_ = true;
-    if (allowance.learner_epoch() != epoch_) {
-      if (epoch_ != 0) {
-        INDRIVE_LOG(kInfo, "actor")
-            << "learner restarted (epoch " << allowance.learner_epoch() << ")";
-      }
-      epoch_ = allowance.learner_epoch();
-    }
-  }
-
-  void on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::uint64_t own_steps) {
-    if (heartbeat.role() != msg::ROLE_LEARNER) return;
-    if (dds::validate(heartbeat, run_id_) != dds::DropReason::kOk) return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    last_heard_ = Clock::now();
-    received_ = heartbeat.env_steps();
-    own_at_heartbeat_ = own_steps;
-  }
-
-  // True when one more step stays within the allowance.
-  bool may_step(std::uint64_t own_steps) const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (!have_allowance_) return false;
-    const std::uint64_t estimate = received_ + (own_steps - std::min(own_steps, own_at_heartbeat_));
-    return estimate < allowed_;
-  }
-
-  // Seconds since the last allowance or learner heartbeat of this run (since this gate was made
-  // when none came yet).
-  double silent_s() const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return seconds_since(last_heard_);
-  }
-
- private:
-  std::string run_id_;
-  mutable std::mutex mutex_;
-  bool have_allowance_ = false;
-  std::uint64_t allowed_ = 0;
-  std::uint64_t epoch_ = 0;
-  std::uint64_t received_ = 0;
-  std::uint64_t own_at_heartbeat_ = 0;
-  Clock::time_point last_heard_ = Clock::now();
-};
 
 }  // namespace
 
@@ -147,10 +90,14 @@ struct TrainingActor::Impl {
     result_writer = &endpoints->writer<msg::EpisodeResult>();
     heartbeat_writer = &endpoints->writer<msg::Heartbeat>();
     request_writer = &endpoints->writer<msg::SnapshotRequest>();
-    endpoints->reader<msg::PolicySnapshot>(
-        [this](const msg::PolicySnapshot& snapshot) { inbox.offer(snapshot); });
-    endpoints->reader<msg::SnapshotAnnounce>(
-        [this](const msg::SnapshotAnnounce& announce) { inbox.announce(announce); });
+    endpoints->reader<msg::PolicySnapshot>([this](const msg::PolicySnapshot& snapshot) {
+      inbox.offer(snapshot);
+      gate.wake();
+    });
+    endpoints->reader<msg::SnapshotAnnounce>([this](const msg::SnapshotAnnounce& announce) {
+      inbox.announce(announce);
+      gate.wake();
+    });
     endpoints->reader<msg::StepAllowance>(
         [this](const msg::StepAllowance& allowance) { gate.on_allowance(allowance); });
     endpoints->reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
@@ -271,16 +218,25 @@ struct TrainingActor::Impl {
                                 << " not received; requested it again";
   }
 
-  // Blocks while the allowance is used up, keeping heartbeats and snapshot swaps going.
+  // Blocks while the allowance is used up, keeping heartbeats and snapshot swaps going. It
+  // sleeps until the learner's next allowance or heartbeat, or a snapshot, arrives (their DDS
+  // callbacks wake it), and at least every kWaitTick for the timed duties (heartbeat, rejoin,
+  // snapshot request). It used to poll every 2 ms: in a rate-limited run on 2 cores the actor
+  // waits about 94% of the time, and each of those 500 wake-ups a second took a core from the
+  // learner's threads in the middle of an update (docs/architecture.md section 8).
   void wait_for_allowance(const std::atomic<bool>& stop) {
     if (gate.may_step(own_steps.load())) return;
+    constexpr auto kWaitTick = std::chrono::milliseconds(50);
     const auto start = Clock::now();
-    while (!stop.load() && !gate.may_step(own_steps.load())) {
+    while (!stop.load()) {
+      const std::uint64_t seen = gate.news();  // news from here on cut the wait short
+      if (gate.may_step(own_steps.load())) break;
       maybe_heartbeat("waiting");
       maybe_rejoin();
       maybe_request();
       maybe_swap(stop);
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      if (gate.may_step(own_steps.load())) break;
+      gate.wait_for_news(seen, kWaitTick);
     }
     stats.wait_s += seconds_since(start);
   }

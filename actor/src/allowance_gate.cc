@@ -1,0 +1,70 @@
+#include "indrive/actor/allowance_gate.h"
+
+#include <algorithm>
+#include <utility>
+
+#include "indrive/basics/log.h"
+
+namespace indrive::actor {
+
+AllowanceGate::AllowanceGate(std::string run_id) : run_id_(std::move(run_id)) {}
+
+void AllowanceGate::arrived() {
+  ++news_;
+  news_arrived_.notify_all();
+}
+
+void AllowanceGate::on_allowance(const msg::StepAllowance& allowance) {
+  if (dds::validate(allowance, run_id_) != dds::DropReason::kOk) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  last_heard_ = Clock::now();
+  allowed_ = allowance.total_env_steps();
+  have_allowance_ = true;
+  if (allowance.learner_epoch() != epoch_) {
+    if (epoch_ != 0) {
+      INDRIVE_LOG(kInfo, "actor") << "learner restarted (epoch " << allowance.learner_epoch()
+                                  << ")";
+    }
+    epoch_ = allowance.learner_epoch();
+  }
+  arrived();
+}
+
+void AllowanceGate::on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::uint64_t own_steps) {
+  if (heartbeat.role() != msg::ROLE_LEARNER) return;
+  if (dds::validate(heartbeat, run_id_) != dds::DropReason::kOk) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  last_heard_ = Clock::now();
+  received_ = heartbeat.env_steps();
+  own_at_heartbeat_ = own_steps;
+  arrived();
+}
+
+void AllowanceGate::wake() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  arrived();
+}
+
+bool AllowanceGate::may_step(std::uint64_t own_steps) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!have_allowance_) return false;
+  const std::uint64_t estimate = received_ + (own_steps - std::min(own_steps, own_at_heartbeat_));
+  return estimate < allowed_;
+}
+
+double AllowanceGate::silent_s() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return std::chrono::duration<double>(Clock::now() - last_heard_).count();
+}
+
+std::uint64_t AllowanceGate::news() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return news_;
+}
+
+bool AllowanceGate::wait_for_news(std::uint64_t seen, Clock::duration timeout) const {
+  std::unique_lock<std::mutex> lock(mutex_);
+  return news_arrived_.wait_for(lock, timeout, [&] { return news_ != seen; });
+}
+
+}  // namespace indrive::actor
