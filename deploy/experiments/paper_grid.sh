@@ -100,7 +100,7 @@ for program in indrive indrive-actor indrive-train-local; do
   [[ -x $bin/$program ]] || { echo "no $bin/$program: build first (bash deploy/setup.sh build)" >&2; exit 1; }
 done
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive} \
-  GOMP_SPINCOUNT=${GOMP_SPINCOUNT:-10000}  # a short spin before sleeping, as indrive launch sets
+  GOMP_SPINCOUNT=${GOMP_SPINCOUNT:-100000}  # a short spin before sleeping, as indrive launch sets
 
 say() { printf '\033[1m[grid %s]\033[0m %s\n' "$(date +%H:%M:%S)" "$*"; }
 seed_dir="$out/s$seed"

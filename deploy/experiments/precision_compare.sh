@@ -28,7 +28,7 @@ while [[ $# -gt 0 ]]; do
 done
 [[ -x $bin/indrive-train-local ]] || { echo "no $bin/indrive-train-local: build first (bash deploy/setup.sh build)" >&2; exit 1; }
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive} \
-  GOMP_SPINCOUNT=${GOMP_SPINCOUNT:-10000}  # a short spin before sleeping, as indrive launch sets
+  GOMP_SPINCOUNT=${GOMP_SPINCOUNT:-100000}  # a short spin before sleeping, as indrive launch sets
 mkdir -p "$out"
 
 pids=()

@@ -27,7 +27,7 @@ TEST(LaunchPlan, OpenMpWaitDefaultsLeaveTheUsersValues) {
   ::unsetenv("GOMP_SPINCOUNT");
   set_openmp_wait_defaults();
   EXPECT_EQ(value("OMP_WAIT_POLICY"), "passive");
-  EXPECT_EQ(value("GOMP_SPINCOUNT"), "10000");
+  EXPECT_EQ(value("GOMP_SPINCOUNT"), "100000");
   ::setenv("OMP_WAIT_POLICY", "active", 1);
   ::setenv("GOMP_SPINCOUNT", "0", 1);
   set_openmp_wait_defaults();

@@ -16,7 +16,7 @@
 // A full run takes about 5 minutes on a quiet 2-core host (11 on a heavily loaded one): each
 // scenario starts fresh processes, waits for training (and, rate-limited, for the learner to
 // catch up with the prefill), then measures. Children get OMP_WAIT_POLICY=passive and
-// GOMP_SPINCOUNT=10000 unless the environment sets them, as `indrive launch` does.
+// GOMP_SPINCOUNT=100000 unless the environment sets them, as `indrive launch` does.
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>

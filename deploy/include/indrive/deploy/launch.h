@@ -41,7 +41,7 @@ std::vector<ProcessSpec> launch_plan(const LaunchOptions& options);
 
 // Sets, for the children started afterwards, how idle OpenMP threads wait, unless the
 // environment already says: OMP_WAIT_POLICY=passive (the processes share the cores; spinning
-// threads would take them from each other) and GOMP_SPINCOUNT=10000 (libgomp spins that many
+// threads would take them from each other) and GOMP_SPINCOUNT=100000 (libgomp spins that many
 // iterations before sleeping, so an update's back-to-back parallel regions do not each wake
 // threads through the kernel). OpenMP reads both once, when a process loads it.
 void set_openmp_wait_defaults();
