@@ -16,6 +16,7 @@
 #include "indrive/actor/rejoin.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/actor/snapshot_inbox.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/basics/log.h"
@@ -122,7 +123,12 @@ struct Evaluator::Impl {
       case PolicySource::kSnapshot:
         if (!snapshot_file.empty()) {
           // The file's header sizes the model (and the camera) unless the config chose sizes.
-          const SnapshotFile file = read_snapshot_file(snapshot_file);
+          agent::SnapshotFile file;
+          try {
+            file = agent::read_snapshot_file(snapshot_file);
+          } catch (const agent::SnapshotFileError& error) {
+            throw EvalError(error.what());
+          }
           const std::string name = "snapshot file " + snapshot_file.string();
           const std::string note =
               adopt_snapshot_architecture(agent_config, file, service.agent_choices(), name);
@@ -240,9 +246,62 @@ struct Evaluator::Impl {
                         "(policy_version in the results says which)");
   }
 
+  // The learner's final snapshot from <run>/final-snapshot.params (the learner writes it when
+  // its run ends, learner.cc), when this evaluator shares the learner's run directory and the
+  // file is of this run, newer than `after` and of this evaluator's architecture; else nullptr.
+  // It is how an evaluator that received no final snapshot over DDS still evaluates the run's
+  // end: one restarted after the learner exited, or one its learner's samples never reached
+  // (a participant left deaf by a killed process's shared-memory port, docs/architecture.md
+  // section 8).
+  std::shared_ptr<const msg::PolicySnapshot> final_snapshot_from_file(std::uint64_t after) {
+    const std::filesystem::path path = config.run_dir() / "final-snapshot.params";
+    std::error_code error;
+    if (!std::filesystem::is_regular_file(path, error)) return nullptr;
+    const auto mtime = std::filesystem::last_write_time(path, error);
+    if (error || mtime == final_file_seen) return nullptr;  // read (and refused) already
+    final_file_seen = mtime;
+    agent::SnapshotFile file;
+    try {
+      file = agent::read_snapshot_file(path);
+    } catch (const agent::SnapshotFileError& bad) {
+      INDRIVE_LOG(kWarn, "evaluator") << "not using the learner's final snapshot: " << bad.what();
+      return nullptr;
+    }
+    const auto provenance = file.provenance();
+    std::string refused;
+    if (!provenance || provenance->run_id != config.run_id()) {
+      refused = "it is not of run '" + config.run_id() + "'";
+    } else if (provenance->version <= after) {
+      return nullptr;
+    } else {
+      for (const std::string& key : agent::snapshot_architecture_keys()) {
+        if (!agent::is_snapshot_size_key(key) && key != "phase") continue;
+        const std::string have = agent::snapshot_key_text(agent_config, key);
+        if (file.value(key) != have) {
+          refused = "its " + key + " is " + file.value(key) + " where this evaluator has " + have;
+          break;
+        }
+      }
+    }
+    if (!refused.empty()) {
+      INDRIVE_LOG(kWarn, "evaluator")
+          << "not using " << path.string() << " as the final snapshot: " << refused;
+      return nullptr;
+    }
+    auto snapshot = std::make_shared<msg::PolicySnapshot>();
+    snapshot->run_id(provenance->run_id);
+    snapshot->version(provenance->version);
+    snapshot->env_steps(provenance->env_steps);
+    snapshot->params(std::move(file.blob));
+    INDRIVE_LOG(kInfo, "evaluator")
+        << "evaluator " << index << " takes the learner's final snapshot v" << provenance->version
+        << " from " << path.string() << " (none arrived over DDS)";
+    return snapshot;
+  }
+
   // The snapshot to evaluate: newer than `after`, and the learner's final one when asked to
-  // wait for it (or the newest held once the learner has gone silent). nullptr when stopped or
-  // timed out.
+  // wait for it (or the newest held once the learner has gone silent; or, with none held or
+  // announced as final, the learner's final snapshot file). nullptr when stopped or timed out.
   std::shared_ptr<const msg::PolicySnapshot> wait_for_snapshot(const std::atomic<bool>& stop,
                                                                std::uint64_t after,
                                                                bool wait_for_done,
@@ -254,6 +313,14 @@ struct Evaluator::Impl {
       const std::uint64_t last = final_version();
       if (snapshot != nullptr && (!wait_for_done || (last > 0 && snapshot->version() >= last))) {
         return snapshot;
+      }
+      if (wait_for_done && (learner_silent(start) || last > 0)) {
+        auto from_file = final_snapshot_from_file(after);
+        if (from_file != nullptr &&
+            (snapshot == nullptr || from_file->version() >= snapshot->version()) &&
+            (last == 0 || from_file->version() >= last)) {
+          return from_file;
+        }
       }
       if (snapshot != nullptr && learner_silent(start)) {
         warn_evaluating_unannounced(snapshot->version());
@@ -336,7 +403,7 @@ struct Evaluator::Impl {
       load(*snapshot);
       version = snapshot->version();
       // Kept so the same snapshot can be evaluated again without a learner (--snapshot FILE).
-      write_snapshot_file(
+      agent::write_snapshot_file(
           config.run_dir() / "eval" / ("snapshot-v" + std::to_string(version) + ".params"),
           snapshot->params(), agent_config);
       INDRIVE_LOG(kInfo, "evaluator")
@@ -425,6 +492,9 @@ struct Evaluator::Impl {
   // When the learner's last heartbeat arrived (steady clock ticks; 0: never).
   std::atomic<Clock::rep> last_learner_beat{0};
   Clock::time_point connected_at{};
+  // The modification time of the final snapshot file last read (it is read again only when it
+  // changes).
+  std::filesystem::file_time_type final_file_seen{};
   // From actor.rejoin_after_s and rejoin_max_s when a learner's snapshots are evaluated;
   // never replaces a participant otherwise.
   RejoinSchedule rejoin{0.0, 0.0};

@@ -497,7 +497,7 @@ RouteProbe::RouteProbe(const service::ServiceConfig& service) : impl_(std::make_
   }
   const PolicyHead head =
       resolve_head(c.get<std::string>("eval.head"), c.get<std::string>("eval.kind"));
-  const SnapshotFile file = read_snapshot_file(file_name);
+  const agent::SnapshotFile file = agent::read_snapshot_file(file_name);
   const std::string source = "snapshot file " + file_name;
   impl_->agent_config = service.agent();
   const std::string note =

@@ -14,8 +14,8 @@
 #include <thread>
 #include <vector>
 
-#include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
@@ -390,14 +390,14 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*snapshot_cmd) {
-      const auto file = indrive::actor::read_snapshot_file(snapshot_file);
+      const auto file = indrive::agent::read_snapshot_file(snapshot_file);
       std::printf("%s: %s", snapshot_file.c_str(),
-                  indrive::actor::describe_snapshot_file(file).c_str());
+                  indrive::agent::describe_snapshot_file(file).c_str());
       if (!snapshot_acting_out.empty()) {
-        indrive::actor::write_acting_snapshot_file(snapshot_acting_out, file);
+        indrive::agent::write_acting_snapshot_file(snapshot_acting_out, file);
         std::printf("%s: %s", snapshot_acting_out.c_str(),
-                    indrive::actor::describe_snapshot_file(
-                        indrive::actor::read_snapshot_file(snapshot_acting_out))
+                    indrive::agent::describe_snapshot_file(
+                        indrive::agent::read_snapshot_file(snapshot_acting_out))
                         .c_str());
       }
       return 0;
@@ -407,10 +407,10 @@ int main(int argc, char** argv) {
       config.seed = untrained_seed;
       config.replay.seed = untrained_seed;
       const indrive::agent::Agent agent(config);
-      indrive::actor::write_snapshot_file(untrained_out, agent.snapshot(), config);
+      indrive::agent::write_snapshot_file(untrained_out, agent.snapshot(), config);
       std::printf(
           "%s: %s", untrained_out.c_str(),
-          indrive::actor::describe_snapshot_file(indrive::actor::read_snapshot_file(untrained_out))
+          indrive::agent::describe_snapshot_file(indrive::agent::read_snapshot_file(untrained_out))
               .c_str());
       return 0;
     }

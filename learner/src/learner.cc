@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "indrive/agent/agent.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/basics/log.h"
@@ -77,6 +78,13 @@ struct Learner::Impl {
     config.config().write_yaml(run.config_path());
 
     resume();
+    // A final snapshot file left by an earlier end of this run (one resumed with a larger
+    // budget) is not this run's end: evaluators must not take it.
+    std::error_code removed_error;
+    if (std::filesystem::remove(run.path() / "final-snapshot.params", removed_error)) {
+      INDRIVE_LOG(kInfo, "learner") << "removed the final snapshot file of an earlier end of "
+                                       "this run; the run's new end writes it again";
+    }
     fill_target = std::min<std::int64_t>(agent_config.replay.prefill, agent_config.replay.capacity);
     // Actors may always run until replay holds the prefill again; a restored replay needs none.
     fill_floor = stats.counters.env_steps + std::max<std::int64_t>(0, fill_target - replay.size());
@@ -299,6 +307,29 @@ struct Learner::Impl {
     publish_snapshot();
   }
 
+  // The run's final policy as <run>/final-snapshot.params, so it can be evaluated without the
+  // learner: by `indrive-actor --evaluate --snapshot FILE`, and by an evaluator on this host that
+  // waited for the final snapshot but received none over DDS (one restarted after the learner
+  // ended, or one deaf to it; evaluator.cc). Written before the final announce.
+  void write_final_snapshot() {
+    const auto& newest = publisher->newest();
+    if (!newest) return;
+    const std::filesystem::path path = run.path() / "final-snapshot.params";
+    try {
+      agent::write_snapshot_file(path, newest->params(), agent_config,
+                                 agent::SnapshotProvenance{.run_id = config.run_id(),
+                                                           .version = newest->version(),
+                                                           .env_steps = newest->env_steps()});
+      INDRIVE_LOG(kInfo, "learner")
+          << "final snapshot v" << newest->version() << " written to " << path.string();
+    } catch (const std::exception& error) {
+      INDRIVE_LOG(kError, "learner")
+          << "the final snapshot v" << newest->version() << " could not be written to "
+          << path.string() << " (" << error.what()
+          << "); evaluators still receive it over DDS while the learner runs";
+    }
+  }
+
   void publish_snapshot() {
     msg::PolicySnapshot snapshot;
     versions.reserve(stats.counters.policy_version + 1);
@@ -486,6 +517,7 @@ struct Learner::Impl {
                                     << stats.counters.updates << " updates";
       std::this_thread::sleep_for(std::chrono::seconds(2));
     }
+    if (done) write_final_snapshot();
     // A final checkpoint that cannot be written loses the run's work since the previous one:
     // the exit code says so (indrive launch restarts a learner that exits non-zero, which then
     // resumes from that previous checkpoint).

@@ -7,15 +7,19 @@
 
 #include "indrive/actor/protocol.h"
 #include "indrive/agent/agent.h"
+#include "indrive/agent/snapshot_file.h"
 
 namespace indrive::actor::test_support {
 
-// The message of the EvalError `body` throws ("" when it throws nothing).
+// The message of the EvalError (or, from the snapshot file format, SnapshotFileError) `body`
+// throws ("" when it throws nothing).
 template <typename F>
 std::string eval_error_of(F&& body) {
   try {
     body();
   } catch (const EvalError& error) {
+    return error.what();
+  } catch (const agent::SnapshotFileError& error) {
     return error.what();
   }
   return "";

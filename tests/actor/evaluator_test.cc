@@ -27,6 +27,10 @@
 namespace indrive::actor {
 namespace {
 
+using agent::read_snapshot_file;
+using agent::SnapshotFile;
+using agent::write_snapshot_file;
+
 service::ServiceConfig resolve(const std::filesystem::path& run_dir,
                                std::vector<std::string> overrides) {
   overrides.insert(overrides.begin(), "preset=tiny");
@@ -275,7 +279,7 @@ struct StandInLearner {
 // A run evaluated over DDS on a fresh domain: one episode (town02, straight, density 5).
 service::ServiceConfig one_episode_over_dds(const std::filesystem::path& run_dir,
                                             std::vector<std::string> overrides) {
-  overrides.insert(overrides.end(),
+  overrides.insert(overrides.begin(),  // the caller's overrides come after, and win
                    {"eval.towns=town02", "eval.routes=straight", "eval.densities=[5]",
                     "eval.episodes_per_cell=1", "eval.snapshot_timeout_s=60",
                     "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
@@ -387,6 +391,39 @@ TEST(Evaluator, ASilentLearnersNewestSnapshotIsEvaluatedAfterTheSilenceLimit) {
   });
   ASSERT_EQ(code, 0);
   expect_one_row_of(dir.path() / "silent-run", 4);
+}
+
+// An evaluator that receives nothing over DDS (restarted after its learner ended, or deaf to
+// it) takes the learner's final snapshot file from the run directory once the learner has been
+// silent for eval.learner_silence_s, and only a file of its own run and architecture.
+TEST(Evaluator, WithNoSnapshotOverDdsTheLearnersFinalSnapshotFileIsEvaluated) {
+  testing::TempDir dir;
+  const auto run_dir = dir.path() / "file-run";
+  auto config = one_episode_over_dds(
+      run_dir, {"eval.learner_silence_s=1", "eval.snapshot_timeout_s=4", "actor.rejoin_after_s=0"});
+  agent::Agent agent(config.agent());
+  std::filesystem::create_directories(run_dir);
+  const auto file = run_dir / "final-snapshot.params";
+
+  // Another run's file, and a file of this run with other sizes: refused, so nothing arrives.
+  write_snapshot_file(
+      file, agent.snapshot(), config.agent(),
+      agent::SnapshotProvenance{.run_id = "other", .version = 7, .env_steps = 7000});
+  EXPECT_EQ(evaluate_beside(config, [] {}), 2) << "another run's final snapshot is not this one's";
+  agent::AgentConfig wider = config.agent();
+  wider.behavior.units *= 2;
+  write_snapshot_file(
+      file, agent::Agent(wider).snapshot(), wider,
+      agent::SnapshotProvenance{.run_id = config.run_id(), .version = 7, .env_steps = 7000});
+  EXPECT_EQ(evaluate_beside(config, [] {}), 2) << "a final snapshot of other sizes is refused";
+  EXPECT_FALSE(std::filesystem::exists(run_dir / "eval/evaluator-0.csv"));
+
+  write_snapshot_file(
+      file, agent.snapshot(), config.agent(),
+      agent::SnapshotProvenance{.run_id = config.run_id(), .version = 7, .env_steps = 7000});
+  ASSERT_EQ(evaluate_beside(config, [] {}), 0);
+  expect_one_row_of(run_dir, 7);
+  EXPECT_EQ(read_snapshot_file(run_dir / "eval/snapshot-v7.params").blob, agent.snapshot());
 }
 
 // Continuous mode against a stand-in learner: snapshots v1..v5 with every_k = 2 give curve

@@ -18,6 +18,8 @@
 namespace indrive::actor {
 namespace {
 
+using agent::write_snapshot_file;
+
 using namespace std::chrono_literals;
 
 TEST(ChoicePoints, EachChoiceOfABuiltInRouteHasItsJunctionOnTheRoute) {

@@ -21,6 +21,15 @@
 namespace indrive::actor {
 namespace {
 
+using agent::describe_snapshot_file;
+using agent::kSnapshotFileFormat;
+using agent::read_snapshot_file;
+using agent::snapshot_architecture_keys;
+using agent::snapshot_groups;
+using agent::SnapshotFile;
+using agent::write_acting_snapshot_file;
+using agent::write_snapshot_file;
+
 using test_support::eval_error_of;
 using test_support::tiny_snapshot;
 

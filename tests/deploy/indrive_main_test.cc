@@ -6,8 +6,8 @@
 #include <fstream>
 
 #include "child_process.h"
-#include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/nn/serialize.h"
 #include "testing.h"
 
@@ -139,7 +139,7 @@ TEST(IndriveSnapshot, SaysWhatAFileHoldsAndWritesTheActingOnlyForm) {
   const nn::ParamGroup* whole[] = {&agent.world_model().params(),
                                    &agent.exploration().actor_params()};
   const auto old_path = dir.path() / "old.params";
-  actor::write_snapshot_file(old_path, nn::save_params(whole), tiny);
+  agent::write_snapshot_file(old_path, nn::save_params(whole), tiny);
   const auto new_path = dir.path() / "acting.params";
   const auto log = dir.path() / "snapshot.log";
   testing::Child snapshot(
@@ -150,7 +150,7 @@ TEST(IndriveSnapshot, SaysWhatAFileHoldsAndWritesTheActingOnlyForm) {
   EXPECT_NE(output.find("the whole world model"), std::string::npos) << output;
   EXPECT_NE(output.find(new_path.string() + ": format 1"), std::string::npos) << output;
   EXPECT_NE(output.find("what acting runs"), std::string::npos) << output;
-  EXPECT_EQ(actor::read_snapshot_file(new_path).blob, agent.snapshot());
+  EXPECT_EQ(agent::read_snapshot_file(new_path).blob, agent.snapshot());
 
   const auto missing_log = dir.path() / "missing.log";
   testing::Child missing({kIndrive.string(), "snapshot", (dir.path() / "none").string()},
@@ -172,12 +172,12 @@ TEST(IndriveUntrained, WritesTheInitialAgentOfAPresetAndSeed) {
   ASSERT_EQ(write.wait(60s), 0) << testing::slurp(log);
   EXPECT_NE(testing::slurp(log).find("preset = tiny"), std::string::npos) << testing::slurp(log);
   const agent::Agent agent(agent::preset("tiny"));
-  EXPECT_EQ(actor::read_snapshot_file(path).blob, agent.snapshot());
+  EXPECT_EQ(agent::read_snapshot_file(path).blob, agent.snapshot());
   testing::Child seeded(
       {kIndrive.string(), "untrained", "--preset", "tiny", "--seed", "3", "--out", other.string()},
       dir.path() / "seeded.log");
   ASSERT_EQ(seeded.wait(60s), 0);
-  EXPECT_NE(actor::read_snapshot_file(other).blob, agent.snapshot());
+  EXPECT_NE(agent::read_snapshot_file(other).blob, agent.snapshot());
   const auto bad_log = dir.path() / "bad.log";
   testing::Child bad({kIndrive.string(), "untrained", "--preset", "huge", "--out", path.string()},
                      bad_log);

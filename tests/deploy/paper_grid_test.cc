@@ -6,8 +6,8 @@
 #include <fstream>
 
 #include "child_process.h"
-#include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/nn/serialize.h"
 #include "testing.h"
@@ -44,7 +44,7 @@ void write_finished_run(const fs::path& dir, agent::Agent& agent,
              "run:\n  dir: " + (kSource / "runs/paper-grid/s0/pretrain-disag").string() + "\n");
   const nn::ParamGroup* whole[] = {&agent.world_model().params(),
                                    &agent.exploration().actor_params()};
-  actor::write_snapshot_file(dir / "snapshot.params", nn::save_params(whole), config);
+  agent::write_snapshot_file(dir / "snapshot.params", nn::save_params(whole), config);
   EpisodeCsvWriter(dir / "train-episodes.csv")
       .write({.run_id = "pretrain-disag", .eval_kind = "training", .steps = 150});
   write_text(dir / "DONE", "");
@@ -79,7 +79,7 @@ TEST(PaperGridPublish, CopiesFinishedRunsAndEvaluationsAndLeavesOutTheRest) {
   EXPECT_EQ(config.find(kSource.string()), std::string::npos) << config;
   EXPECT_NE(config.find("dir: runs/paper-grid/s0/pretrain-disag"), std::string::npos) << config;
   // Seed 0 is the default of --snapshot-seeds: its file is rewritten with what acting runs.
-  EXPECT_EQ(actor::read_snapshot_file(page / "snapshots/s0-pretrain-disag.params").blob,
+  EXPECT_EQ(agent::read_snapshot_file(page / "snapshots/s0-pretrain-disag.params").blob,
             agent.snapshot());
   EXPECT_EQ(testing::slurp(page / "eval/s0-zeroshot-disag-evaluator-0.csv"), testing::slurp(rows));
   EXPECT_FALSE(fs::exists(page / "runs/s0-finetune-lf-disag"));

@@ -7,6 +7,7 @@
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
 #include "indrive/agent/policy.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/nn/serialize.h"
 
 namespace {
@@ -16,7 +17,7 @@ using namespace indrive;
 void make_seeds(const fuzz::fs::path& dir) {
   const auto config = fuzz::micro_agent();
   const auto blob = agent::Agent(config).snapshot();
-  actor::write_snapshot_file(dir / "format1", blob, config);
+  agent::write_snapshot_file(dir / "format1", blob, config);
   fuzz::write_seed(dir, "format0", blob);  // a bare blob from before the header
 }
 
@@ -26,8 +27,9 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) { return fuzz::initialize(mak
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const auto& path = fuzz::as_file(data, size, ".params");
-  fuzz::accept<actor::EvalError, agent::AgentConfigError, nn::SerializationError>([&] {
-    const actor::SnapshotFile file = actor::read_snapshot_file(path);
+  fuzz::accept<actor::EvalError, agent::SnapshotFileError, agent::AgentConfigError,
+               nn::SerializationError>([&] {
+    const agent::SnapshotFile file = agent::read_snapshot_file(path);
     agent::AgentConfig config = fuzz::micro_agent();
     actor::adopt_snapshot_architecture(config, file, {}, path.string());
     agent::validate(config);

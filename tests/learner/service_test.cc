@@ -15,6 +15,7 @@
 
 #include "child_process.h"
 #include "indrive/actor/chunk_builder.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/dds/participant.h"
 #include "testing.h"
@@ -264,6 +265,10 @@ TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExi
         final_announced = announce.version();
       });
   const std::vector<std::string> budget = {"--set", "run.budget_env_steps=400"};
+  // A final snapshot file left by an earlier end of this run is removed when the learner
+  // starts, and the run's own end writes it again.
+  fs::create_directories(run_dir_);
+  std::ofstream(run_dir_ / "final-snapshot.params") << "an earlier end of this run";
   auto learner = start_learner(budget);
   auto actor = start_actor(0, budget);
   ASSERT_EQ(learner->wait(150s), 0) << logs();
@@ -278,6 +283,21 @@ TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExi
   EXPECT_GT(final_announced, 0u);
   EXPECT_EQ(final_announced, newest_snapshot);
   EXPECT_EQ(final_announced, metrics.value("policy_version", 0u)) << metrics.dump();
+
+  // The final snapshot is also a file in the run directory, for evaluators that missed it over
+  // DDS and for evaluating the run later: the announced version, of this run, at its budget.
+  const agent::SnapshotFile file = agent::read_snapshot_file(run_dir_ / "final-snapshot.params");
+  const auto provenance = file.provenance();
+  ASSERT_TRUE(provenance.has_value()) << agent::describe_snapshot_file(file);
+  EXPECT_EQ(provenance->run_id, "itest");
+  EXPECT_EQ(provenance->version, final_announced);
+  EXPECT_GT(provenance->env_steps, 0u);
+  EXPECT_LE(provenance->env_steps, metrics.value("env_steps", 0u)) << metrics.dump();
+  EXPECT_EQ(file.value("preset"), "tiny");
+  EXPECT_EQ(file.value("actor"), "expl_actor");
+  EXPECT_NE(slurp(dir_.path() / "learner.log").find("removed the final snapshot file"),
+            std::string::npos)
+      << "the earlier end's file is removed at the start, not only overwritten at the end";
 
   // The same run's episodes (at most 151 steps each, so two or more within the budget) reach
   // the learner's metrics from the actor's EpisodeResults: their length, and their reach in

@@ -13,8 +13,8 @@
 #include "indrive/actor/protocol.h"
 #include "indrive/actor/protocol_episode.h"
 #include "indrive/actor/protocol_record.h"
-#include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/local_trainer.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/basics/log.h"
@@ -330,7 +330,7 @@ struct LocalRun::Impl {
     save_checkpoint();
     // The acting policy as a snapshot file, evaluable without this run directory
     // (indrive-actor --evaluate --snapshot FILE).
-    actor::write_snapshot_file(run.path() / "snapshot.params", trainer.agent().snapshot(),
+    agent::write_snapshot_file(run.path() / "snapshot.params", trainer.agent().snapshot(),
                                agent_config);
     coverage.write_csv(run.path() / "coverage.csv");
     INDRIVE_LOG(kInfo, "local") << (stop.load() ? "stopped" : "budget reached") << ": "

@@ -5,6 +5,7 @@
 //   runs/<run_id>/metrics.jsonl    one JSON object per log interval
 //   runs/<run_id>/eval/*.csv       one row per evaluated episode
 //   runs/<run_id>/train-episodes.csv   one row per finished training episode (same columns)
+//   runs/<run_id>/final-snapshot.params   the policy the learner ended the run with
 //   runs/<run_id>/report.md, plots/*.png, videos/*.mp4
 //
 //   RunDir run = RunDir::open_or_create("runs", "pretrain-disag-s0");
