@@ -252,8 +252,10 @@ struct Evaluator::Impl {
   // It is how an evaluator that received no final snapshot over DDS still evaluates the run's
   // end: one restarted after the learner exited, or one its learner's samples never reached
   // (a participant left deaf by a killed process's shared-memory port, docs/architecture.md
-  // section 8).
-  std::shared_ptr<const msg::PolicySnapshot> final_snapshot_from_file(std::uint64_t after) {
+  // section 8). Also nullptr when the file's version is under `at_least` (the final version
+  // announced, or a snapshot already held).
+  std::shared_ptr<const msg::PolicySnapshot> final_snapshot_from_file(std::uint64_t after,
+                                                                      std::uint64_t at_least) {
     const std::filesystem::path path = config.run_dir() / "final-snapshot.params";
     std::error_code error;
     if (!std::filesystem::is_regular_file(path, error)) return nullptr;
@@ -271,7 +273,7 @@ struct Evaluator::Impl {
     std::string refused;
     if (!provenance || provenance->run_id != config.run_id()) {
       refused = "it is not of run '" + config.run_id() + "'";
-    } else if (provenance->version <= after) {
+    } else if (provenance->version <= after || provenance->version < at_least) {
       return nullptr;
     } else {
       for (const std::string& key : agent::snapshot_architecture_keys()) {
@@ -314,13 +316,10 @@ struct Evaluator::Impl {
       if (snapshot != nullptr && (!wait_for_done || (last > 0 && snapshot->version() >= last))) {
         return snapshot;
       }
-      if (wait_for_done && (learner_silent(start) || last > 0)) {
-        auto from_file = final_snapshot_from_file(after);
-        if (from_file != nullptr &&
-            (snapshot == nullptr || from_file->version() >= snapshot->version()) &&
-            (last == 0 || from_file->version() >= last)) {
-          return from_file;
-        }
+      if (wait_for_done && (last > 0 || learner_silent(start))) {
+        auto from_file =
+            final_snapshot_from_file(after, std::max(last, snapshot ? snapshot->version() : 0));
+        if (from_file != nullptr) return from_file;
       }
       if (snapshot != nullptr && learner_silent(start)) {
         warn_evaluating_unannounced(snapshot->version());
@@ -423,6 +422,7 @@ struct Evaluator::Impl {
     CurveWriter curve(config.run_dir() / "eval" / ("curve-" + std::to_string(index) + ".csv"));
     std::uint64_t evaluated = 0;
     int evaluations = 0;
+    bool final_from_file = false;
     while (!stop.load()) {
       const std::uint64_t last = final_version();
       if (last > 0 && evaluated >= last) break;
@@ -438,6 +438,15 @@ struct Evaluator::Impl {
           break;
         }
         if (done_version > 0 && evaluated >= done_version) break;
+        // The run's end from the learner's file when it did not come over DDS (as in run()).
+        if (done_version > 0 || learner_silent(start)) {
+          next = final_snapshot_from_file(evaluated,
+                                          std::max(done_version, newest ? newest->version() : 0));
+          if (next != nullptr) {
+            final_from_file = true;
+            break;
+          }
+        }
         if (evaluated > 0 && learner_silent(start)) {
           // The curve ends with the newest snapshot held, evaluated once.
           if (newest != nullptr) {
@@ -466,6 +475,7 @@ struct Evaluator::Impl {
       run_episodes(stop, next->version(), next->env_steps(), nullptr, &curve);
       evaluated = next->version();
       ++evaluations;
+      if (final_from_file) break;  // the learner has ended: nothing newer will come
     }
     if (result_writer) result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
     return 0;

@@ -483,6 +483,41 @@ TEST(Evaluator, ContinuousModeEvaluatesEveryKthSnapshotIntoALearningCurve) {
   EXPECT_THROW(deploy::load_results({dir.path() / "curve-run"}), CsvError);
 }
 
+// Continuous mode whose learner ends without its final snapshot reaching the evaluator (its
+// "done" heartbeat names v5, v5 never comes over DDS): the curve's last row is v5 from the
+// learner's final snapshot file, and the evaluator ends without waiting for more.
+TEST(Evaluator, ContinuousModeEndsTheCurveWithTheLearnersFinalSnapshotFile) {
+  testing::TempDir dir;
+  const auto run_dir = dir.path() / "curve-file-run";
+  const auto config =
+      resolve(run_dir, {"eval.continuous=true", "eval.every_k=2", "eval.towns=town02",
+                        "eval.routes=straight", "eval.densities=[5]", "eval.episodes_per_cell=1",
+                        "eval.snapshot_timeout_s=60", "actor.request_after_s=600",
+                        "dds.domain_id=" + std::to_string(testing::unique_domain_id())});
+  StandInLearner learner(config);
+  const auto curve = run_dir / "eval" / "curve-0.csv";
+  const int code = evaluate_beside(config, [&] {
+    learner.publish(1);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (curve_rows(curve).empty() && std::chrono::steady_clock::now() < deadline) {
+      learner.beat(false, 1);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    write_snapshot_file(
+        run_dir / "final-snapshot.params", learner.agent.snapshot(), config.agent(),
+        agent::SnapshotProvenance{.run_id = config.run_id(), .version = 5, .env_steps = 5000});
+    for (int i = 0; i < 10; ++i) {
+      learner.beat(true, 5);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  });
+  ASSERT_EQ(code, 0);
+  const auto rows = curve_rows(curve);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].rfind("1000,1,", 0), 0u) << rows[0];
+  EXPECT_EQ(rows[1].rfind("5000,5,", 0), 0u) << rows[1];
+}
+
 // The message of the EvalError constructing an evaluator throws ("" when none).
 std::string setup_error(const service::ServiceConfig& config) {
   try {
