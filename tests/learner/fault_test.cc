@@ -1,6 +1,7 @@
 // Faults of the service as real processes on the tiny preset: an actor killed under
 // `indrive launch`, a learner killed between checkpoints, a late-joining evaluator (also one
-// that can only get the snapshot through the announce and re-request path), and foreign or
+// that can only get the snapshot through the announce and re-request path, and one started after
+// its learner ended, which takes the learner's final snapshot file), and foreign or
 // corrupt snapshots sent to running actors. Each test prints the figures it measured.
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -15,6 +16,8 @@
 #include <thread>
 
 #include "indrive/agent/replay.h"
+#include "indrive/agent/snapshot_file.h"
+#include "indrive/basics/episode_csv.h"
 #include "indrive/basics/run_dir.h"
 #include "indrive/learner/learner.h"
 #include "process_harness.h"
@@ -581,6 +584,46 @@ std::uint64_t evaluated_version(const fs::path& log, std::chrono::seconds timeou
     return true;
   });
   return version;
+}
+
+// An evaluator (re)started after its learner ended, as `indrive launch` restarts a killed one:
+// no learner is left to send the final snapshot, so it takes the learner's final-snapshot.params
+// from the run directory once eval.learner_silence_s has passed. (The chaos soak once failed on
+// an evaluator that waited for a snapshot no one would send, 2026-12-06.)
+TEST_F(FaultTest, AnEvaluatorStartedAfterItsLearnerEndedEvaluatesTheFinalSnapshotFile) {
+  const std::vector<std::string> budget = {"run.budget_env_steps=512"};
+  auto learner = start_learner(budget);
+  auto actor = start_actor(0, budget);
+  ASSERT_EQ(learner->wait(150s), 0) << logs();
+  actor->signal(SIGTERM);
+  EXPECT_EQ(actor->wait(30s), 0) << logs();
+  const fs::path file = run_dir_ / "final-snapshot.params";
+  ASSERT_TRUE(fs::exists(file)) << logs();
+  const auto provenance = agent::read_snapshot_file(file).provenance();
+  ASSERT_TRUE(provenance.has_value());
+  EXPECT_EQ(provenance->version, metrics().back().value("policy_version", 0u));
+
+  auto argv = testing::service_args(
+      "indrive-actor", config_, run_dir_, domain_, profile_,
+      {"eval.towns=town01", "eval.routes=straight", "eval.densities=[5]",
+       "eval.episodes_per_cell=2", "eval.learner_silence_s=2", "eval.snapshot_timeout_s=60"});
+  argv.insert(argv.end(), {"--evaluate", "--id", "0"});
+  const auto started = std::chrono::steady_clock::now();
+  Child evaluator(argv, dir_.path() / "evaluator-after.log");
+  ASSERT_EQ(evaluator.wait(120s), 0) << logs();
+  const double after_s = testing::seconds_since(started);
+  const auto rows = read_episode_csv(run_dir_ / "eval" / "evaluator-0.csv");
+  ASSERT_EQ(rows.size(), 2u) << logs();
+  for (const auto& row : rows) {
+    EXPECT_EQ(row.policy_version, static_cast<long long>(provenance->version));
+  }
+  EXPECT_NE(testing::slurp(dir_.path() / "evaluator-after.log").find("from " + file.string()),
+            std::string::npos)
+      << logs();
+  std::printf(
+      "[figures] evaluator started after its learner ended: v%llu from the final snapshot file, "
+      "evaluated and done %.2f s after its process started\n",
+      static_cast<unsigned long long>(provenance->version), after_s);
 }
 
 TEST_F(FaultTest, LateJoiningEvaluatorGetsTheNewestSnapshotAlsoThroughTheReRequestPath) {
