@@ -59,8 +59,13 @@ TEST(ProcessWatch, ReplacesItsParticipantWhenAHeardProcessFallsSilent) {
   };
   const std::vector<std::pair<std::uint32_t, std::uint32_t>> actor4 = {{msg::ROLE_ACTOR, 4}};
   SeenHeartbeat seen;
-  beat(1);
-  ASSERT_TRUE(wait_until(10s, [&] { return watch.heartbeat(msg::ROLE_ACTOR, 4, seen); }));
+  // Sent until heard: the writer may match the watch's reader before the reader has matched
+  // the writer, and a heartbeat written in between is lost (best effort; once in 12 runs here
+  // under load, 2026-12-06).
+  ASSERT_TRUE(wait_until(10s, [&] {
+    beat(1);
+    return watch.heartbeat(msg::ROLE_ACTOR, 4, seen);
+  }));
   // Heard within the limit.
   EXPECT_FALSE(watch.replace_if_unheard(actor4, 5.0));
   std::this_thread::sleep_for(1500ms);
