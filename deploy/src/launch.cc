@@ -255,6 +255,13 @@ int run_launch(const LaunchOptions& options) {
                  "ended " + local_time_now() + ", learner exit code " + std::to_string(exit_code));
     std::printf("%-12s | %s\n", "launch", page.summary().c_str());
   }
+  const fs::path final_snapshot = run_dir / "final-snapshot.params";
+  if (fs::exists(final_snapshot)) {
+    std::printf(
+        "%-12s | the run's final policy: %s (indrive-actor --evaluate --snapshot FILE evaluates "
+        "it again, with no config)\n",
+        "launch", final_snapshot.c_str());
+  }
   return exit_code;
 }
 

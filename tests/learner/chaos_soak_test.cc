@@ -273,8 +273,12 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
     EXPECT_EQ(after.value(key, 0) - before.value(key, 0), 5) << key;
   }
 
-  // The run ends by its budget; the evaluator evaluates the final snapshot.
+  // The run ends by its budget; the evaluator evaluates the final snapshot, and the launcher
+  // names the file the learner left it in.
   EXPECT_EQ(launcher.wait(600s), 0) << logs();
+  EXPECT_TRUE(fs::exists(run_dir / "final-snapshot.params")) << logs();
+  EXPECT_NE(testing::slurp(dir.path() / "launch.log").find("the run's final policy: "),
+            std::string::npos);
 
   // Policy versions strictly rise, one content per version.
   const auto snapshots = watch.snapshots();
