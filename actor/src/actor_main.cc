@@ -29,8 +29,9 @@ int main(int argc, char** argv) {
   bool continuous = false;
   app.add_option("--policy", policy, "evaluation policy: snapshot, oracle or random (eval.policy)");
   app.add_option("--snapshot", snapshot,
-                 "evaluate this snapshot file (eval.snapshot_file) instead of the learner's; "
-                 "the model's preset and sizes come from the file");
+                 "evaluate this snapshot file (eval.snapshot_file) instead of the learner's, or "
+                 "a run directory's final-snapshot.params; the model's preset and sizes come "
+                 "from the file");
   app.add_flag("--continuous", continuous,
                "evaluate every eval.every_k-th new snapshot into a learning curve");
   bool probe = false;

@@ -123,6 +123,7 @@ struct Evaluator::Impl {
       case PolicySource::kSnapshot:
         if (!snapshot_file.empty()) {
           // The file's header sizes the model (and the camera) unless the config chose sizes.
+          snapshot_file = snapshot_file_path(snapshot_file);  // a run directory: its final one
           agent::SnapshotFile file;
           try {
             file = agent::read_snapshot_file(snapshot_file);

@@ -1,6 +1,7 @@
 #include "indrive/actor/snapshot_file.h"
 
 #include <algorithm>
+#include <filesystem>
 
 #include "text.h"
 
@@ -20,6 +21,17 @@ PolicyHead resolve_head(const std::string& head, const std::string& eval_kind) {
 
 const char* head_group(PolicyHead head) {
   return head == PolicyHead::kExploration ? "expl_actor" : "task_actor";
+}
+
+std::filesystem::path snapshot_file_path(const std::filesystem::path& given) {
+  std::error_code error;
+  if (!std::filesystem::is_directory(given, error)) return given;
+  const std::filesystem::path final_snapshot = given / "final-snapshot.params";
+  if (std::filesystem::is_regular_file(final_snapshot, error)) return final_snapshot;
+  throw EvalError("--snapshot " + given.string() +
+                  " is a directory without a final-snapshot.params (a run's learner writes it "
+                  "when the run ends); name a snapshot file: a run's final-snapshot.params, or "
+                  "<run>/eval/snapshot-v<N>.params written by an evaluator");
 }
 
 void check_snapshot_head(std::span<const std::uint8_t> blob, PolicyHead head,

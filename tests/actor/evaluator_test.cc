@@ -211,6 +211,42 @@ TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {
       std::filesystem::exists(dir.path() / "disag-s1/videos/eval-town02-straight-5-1.mp4"));
 }
 
+// --snapshot DIR names a finished run: its learner's final-snapshot.params; a directory without
+// one is refused before anything starts, saying which files to name.
+TEST(Evaluator, ARunDirectoryAsTheSnapshotMeansItsFinalSnapshot) {
+  testing::TempDir dir;
+  const auto finished = dir.path() / "finished-run";
+  std::filesystem::create_directories(finished);
+  agent::AgentConfig agent_config = agent::preset("tiny");
+  write_snapshot_file(
+      finished / "final-snapshot.params", agent::Agent(agent_config).snapshot(), agent_config,
+      agent::SnapshotProvenance{.run_id = "finished-run", .version = 9, .env_steps = 900});
+  auto evaluate = [&](const std::filesystem::path& given) {
+    return service::ServiceConfig::resolve(
+        {.run_dir = dir.path() / "again",
+         .overrides = {"eval.snapshot_file=" + given.string(), "eval.towns=town02",
+                       "eval.routes=straight", "eval.densities=[5]", "eval.episodes_per_cell=1",
+                       "eval.snapshot_timeout_s=1"}});
+  };
+  {
+    const auto config = evaluate(finished);
+    Evaluator evaluator(config, 0, 1);
+    const std::atomic<bool> stop{false};
+    ASSERT_EQ(evaluator.run(stop), 0);
+    EXPECT_EQ(read_episode_csv(evaluator.results_file()).size(), 1u);
+  }
+  const auto empty = dir.path() / "empty-run";
+  std::filesystem::create_directories(empty);
+  std::string message;
+  try {
+    Evaluator evaluator(evaluate(empty), 0, 1);
+  } catch (const EvalError& error) {
+    message = error.what();
+  }
+  EXPECT_NE(message.find("without a final-snapshot.params"), std::string::npos) << message;
+  EXPECT_NE(message.find("eval/snapshot-v<N>.params"), std::string::npos) << message;
+}
+
 // Lines of a learning-curve file after its header (0 when it does not exist yet).
 std::vector<std::string> curve_rows(const std::filesystem::path& path) {
   std::vector<std::string> rows;

@@ -25,6 +25,11 @@ PolicyHead resolve_head(const std::string& head, const std::string& eval_kind);
 // The parameter-group name of a head's actor ("expl_actor" or "task_actor").
 const char* head_group(PolicyHead head);
 
+// The snapshot file `given` names (eval.snapshot_file, --snapshot): a file as it is, or a run
+// directory, which names the final-snapshot.params its learner wrote as the run ended. Throws
+// EvalError for a directory without one, saying where snapshot files are.
+std::filesystem::path snapshot_file_path(const std::filesystem::path& given);
+
 // Throws EvalError naming `source`, the groups the snapshot holds and what to do, when the
 // blob has no actor group for `head`.
 void check_snapshot_head(std::span<const std::uint8_t> blob, PolicyHead head,
