@@ -257,7 +257,7 @@ struct Evaluator::Impl {
   // announced, or a snapshot already held).
   std::shared_ptr<const msg::PolicySnapshot> final_snapshot_from_file(std::uint64_t after,
                                                                       std::uint64_t at_least) {
-    const std::filesystem::path path = config.run_dir() / "final-snapshot.params";
+    const std::filesystem::path path = final_snapshot_path(config.run_dir());
     std::error_code error;
     if (!std::filesystem::is_regular_file(path, error)) return nullptr;
     const auto mtime = std::filesystem::last_write_time(path, error);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "indrive/basics/run_dir.h"
 #include "text.h"
 
 namespace indrive::actor {
@@ -20,13 +21,14 @@ PolicyHead resolve_head(const std::string& head, const std::string& eval_kind) {
 }
 
 const char* head_group(PolicyHead head) {
-  return head == PolicyHead::kExploration ? "expl_actor" : "task_actor";
+  return agent::acting_actor_group(head == PolicyHead::kExploration ? agent::Phase::kPretrain
+                                                                    : agent::Phase::kFinetune);
 }
 
 std::filesystem::path snapshot_file_path(const std::filesystem::path& given) {
   std::error_code error;
   if (!std::filesystem::is_directory(given, error)) return given;
-  const std::filesystem::path final_snapshot = given / "final-snapshot.params";
+  const std::filesystem::path final_snapshot = final_snapshot_path(given);
   if (std::filesystem::is_regular_file(final_snapshot, error)) return final_snapshot;
   throw EvalError("--snapshot " + given.string() +
                   " is a directory without a final-snapshot.params (a run's learner writes it "

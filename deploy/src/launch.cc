@@ -255,7 +255,7 @@ int run_launch(const LaunchOptions& options) {
                  "ended " + local_time_now() + ", learner exit code " + std::to_string(exit_code));
     std::printf("%-12s | %s\n", "launch", page.summary().c_str());
   }
-  const fs::path final_snapshot = run_dir / "final-snapshot.params";
+  const fs::path final_snapshot = final_snapshot_path(run_dir);
   if (fs::exists(final_snapshot)) {
     std::printf(
         "%-12s | the run's final policy: %s (indrive-actor --evaluate --snapshot FILE evaluates "

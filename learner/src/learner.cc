@@ -81,7 +81,7 @@ struct Learner::Impl {
     // A final snapshot file left by an earlier end of this run (one resumed with a larger
     // budget) is not this run's end: evaluators must not take it.
     std::error_code removed_error;
-    if (std::filesystem::remove(run.path() / "final-snapshot.params", removed_error)) {
+    if (std::filesystem::remove(final_snapshot_path(run.path()), removed_error)) {
       INDRIVE_LOG(kInfo, "learner") << "removed the final snapshot file of an earlier end of "
                                        "this run; the run's new end writes it again";
     }
@@ -314,7 +314,7 @@ struct Learner::Impl {
   void write_final_snapshot() {
     const auto& newest = publisher->newest();
     if (!newest) return;
-    const std::filesystem::path path = run.path() / "final-snapshot.params";
+    const std::filesystem::path path = final_snapshot_path(run.path());
     try {
       agent::write_snapshot_file(path, newest->params(), agent_config,
                                  agent::SnapshotProvenance{.run_id = config.run_id(),

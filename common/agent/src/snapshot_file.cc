@@ -262,9 +262,7 @@ void write_snapshot_file(const std::filesystem::path& path, std::span<const std:
     header += key + "=" + text + "\n";
   }
   if (provenance) {
-    INDRIVE_CHECK(!provenance->run_id.empty() &&
-                  provenance->run_id.find('\n') == std::string::npos &&
-                  provenance->run_id.find('=') == std::string::npos)
+    INDRIVE_CHECK(!provenance->run_id.empty() && provenance->run_id.find('\n') == std::string::npos)
         << "a snapshot's run id '" << provenance->run_id << "' cannot be a header value";
     header += "run_id=" + provenance->run_id + "\n";
     header += "version=" + std::to_string(provenance->version) + "\n";

@@ -39,6 +39,12 @@ class IoError : public std::runtime_error {
 void atomic_write(const std::filesystem::path& path, std::span<const std::uint8_t> bytes);
 void atomic_write(const std::filesystem::path& path, const std::string& text);
 
+// The policy a run's learner ended the run with (a snapshot file), in the run directory
+// `run_dir`: what evaluators and `--snapshot DIR` look for after the learner has gone.
+inline std::filesystem::path final_snapshot_path(const std::filesystem::path& run_dir) {
+  return run_dir / "final-snapshot.params";
+}
+
 // Reads a whole file; throws IoError naming the path if it cannot.
 std::vector<std::uint8_t> read_file(const std::filesystem::path& path);
 
