@@ -7,6 +7,10 @@
 //      global-norm clipping and Adam. The model mirrors shared/bench/torch_wm_step.py, so the two
 //      timings measure the same work.
 //
+//  (c) the one-hot gather of linear_one_hot_tail on the shape of the disagreement ensemble's
+//      first layer (512 imagined states, 8 members' weights side by side): microseconds per
+//      call, gathered and as a dense product (nn::set_gather_one_hot(false)).
+//
 // Usage: nn_bench [--preset tiny|cpu|small] [--threads N] [--iters N] [--skip-gemm]
 // Prints seconds per update, the FLOP count used (GEMM and convolution multiply-adds x2; the
 // backward pass counted as twice the forward, except the input gradient of the first conv,
@@ -22,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "indrive/nn/kernels.h"
 #include "indrive/nn/nn.h"
 
 namespace {
@@ -92,6 +97,45 @@ constexpr Preset kPresets[] = {
     {"small", 128, 32, 512, 512, 32, 32, 16, 64},
 };
 constexpr int kActions = 9;
+
+// (c): linear_one_hot_tail over [deter, one-hot stoch, one-hot action] rows into 8 * units
+// columns, on the calling thread (as the ensemble's reward chunks run), median of 200 calls.
+void one_hot_tail_bench(const Preset& p) {
+  constexpr int kRows = 512, kMembers = 8;
+  const int stoch = p.stoch * p.classes, in = p.deter + stoch + kActions;
+  const int cols = kMembers * p.units;
+  Rng rng(5);
+  std::vector<float> x(static_cast<std::size_t>(kRows) * in, 0.0f);
+  for (int r = 0; r < kRows; ++r) {
+    float* row = x.data() + static_cast<std::size_t>(r) * in;
+    for (int d = 0; d < p.deter; ++d) row[d] = rng.normal();
+    for (int g = 0; g < p.stoch; ++g) row[p.deter + g * p.classes + rng.below(p.classes)] = 1;
+    row[p.deter + stoch + rng.below(kActions)] = 1;
+  }
+  std::vector<float> w(static_cast<std::size_t>(in) * cols);
+  for (float& v : w) v = 0.01f * rng.normal();
+  const int saved_threads = threads();
+  set_threads(1);
+  for (const bool gather : {true, false}) {
+    set_gather_one_hot(gather);
+    std::vector<double> times;
+    Graph& g = current_graph();
+    for (int i = 0; i < 220; ++i) {
+      g.reset();
+      NoGradGuard no_grad;
+      const Tensor xt = constant(Shape{kRows, in}, x), wt = constant(Shape{in, cols}, w);
+      const auto t0 = Clock::now();
+      const Tensor y = linear_one_hot_tail(xt, wt, Tensor(), p.deter);
+      if (i >= 20) times.push_back(seconds_since(t0));
+      if (y.data()[0] == 12345.0f) std::printf(" ");  // keep the result alive
+    }
+    std::printf("one_hot_tail rows=%d dense=%d one_hot=%d ones_per_row=%d cols=%d %s: %.1f us\n",
+                kRows, p.deter, stoch + kActions, p.stoch + 1, cols,
+                gather ? "gathered" : "product", median(times) * 1e6);
+  }
+  set_gather_one_hot(true);
+  set_threads(saved_threads);
+}
 
 // The world model of torch_wm_step.py.
 struct WorldModel {
@@ -211,8 +255,10 @@ int main(int argc, char** argv) {
   const double peak = skip_gemm ? 0.0 : gemm_peak();
   if (!skip_gemm) std::printf("gemm peak: %.1f GFLOP/s\n", peak);
 
-  // (b) World-model update.
   const Preset& p = *preset;
+  one_hot_tail_bench(p);
+
+  // (b) World-model update.
   Rng rng(0);
   ParamGroup group("world_model");
   WorldModel wm(p, group, rng);
