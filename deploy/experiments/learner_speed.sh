@@ -139,7 +139,7 @@ row() {  # figure run value unit target direction
   echo "$(machine started), $(machine threads) hardware threads, load average $(machine load) at the start"
   echo "(\`deploy/experiments/learner_speed.sh\`). ${kernels^}."
   echo
-  echo "Medians of $repeats runs (\`common_agent_bench\`, logs in \`logs/\`). The bound is the update's"
+  echo "Medians of $(find "$logs" -name 'tiny-fp32-t2-*.txt' | wc -l) runs (\`common_agent_bench\`, logs in \`logs/\`). The bound is the update's"
   echo "product FLOPs over the product peak measured in the same run: no update of this size can"
   echo "take less on this machine, whatever the engine does around its products."
   echo

@@ -77,6 +77,7 @@ TEST(LearnerSpeedReport, EveryFigureAgainstItsTargetFromTheLogs) {
     EXPECT_NE(text.find(line), std::string::npos) << "missing: " << line << "\nin:\n" << text;
   };
   has(report, "# Learner speed on Test CPU (avx2 avx512f avx512_bf16)");
+  has(report, "Medians of 3 runs");
   has(report, "| full agent update | tiny, fp32, 2 threads | 0.045 s | <= 0.04 s | not met |");
   has(report, "| full agent update | tiny, bf16, 2 threads | 0.035 s | <= 0.04 s | met |");
   has(report, "| full agent update | tiny, bf16, 1 thread | 0.05 s |  | no target |");
@@ -114,6 +115,7 @@ TEST(LearnerSpeedReport, AMachineWithoutBf16ReportsFp32Only) {
       << testing::slurp(log);
   const std::string report = testing::slurp(out / "report.md");
   EXPECT_EQ(report.find("bf16,"), std::string::npos) << report;
+  EXPECT_NE(report.find("Medians of 1 runs"), std::string::npos) << report;
   EXPECT_NE(
       report.find("| full agent update | cpu, fp32, 2 threads | 1.5 s | <= 0.8 s | not met |"),
       std::string::npos)
