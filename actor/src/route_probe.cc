@@ -491,10 +491,9 @@ RouteProbe::RouteProbe(const service::ServiceConfig& service) : impl_(std::make_
   }
   impl_->budget_speed_mps = c.get<double>("eval.budget_speed_mps");
   impl_->budget_slack = c.get<double>("eval.budget_slack");
-  if (c.get<std::string>("eval.snapshot_file").empty()) {
-    throw EvalError("the route probe needs a snapshot file: --snapshot FILE");
-  }
-  const std::string file_name = snapshot_file_path(c.get<std::string>("eval.snapshot_file"));
+  const std::string given = c.get<std::string>("eval.snapshot_file");
+  if (given.empty()) throw EvalError("the route probe needs a snapshot file: --snapshot FILE");
+  const std::string file_name = snapshot_file_path(given);
   const PolicyHead head =
       resolve_head(c.get<std::string>("eval.head"), c.get<std::string>("eval.kind"));
   const agent::SnapshotFile file = agent::read_snapshot_file(file_name);

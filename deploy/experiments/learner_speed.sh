@@ -90,30 +90,30 @@ best=$(echo "$precisions" | awk '{ print $NF }')
 echo "$kernels"
 
 if ((!report_only)); then
-echo "agent updates ($repeats runs each):"
-for precision in $precisions; do
-  bench tiny 2 "$precision" 60
-  bench tiny 1 "$precision" 60
-  bench cpu 2 "$precision" 4
-done
+  echo "agent updates ($repeats runs each):"
+  for precision in $precisions; do
+    bench tiny 2 "$precision" 60
+    bench tiny 1 "$precision" 60
+    bench cpu 2 "$precision" 4
+  done
 
-if [[ -n $torch ]]; then
-  echo "PyTorch reference (the same update), tiny and cpu, 2 threads:"
-  "$bin/common_agent_bench" --preset tiny --threads 2 --iters 20 --precision "$best" --torch "$torch" \
-    > "$logs/torch-tiny.txt" 2>&1 || echo "  the tiny reference failed, see $logs/torch-tiny.txt" >&2
-  "$bin/common_agent_bench" --preset cpu --threads 2 --iters 3 --precision "$best" --torch "$torch" \
-    > "$logs/torch-cpu.txt" 2>&1 || echo "  the cpu reference failed, see $logs/torch-cpu.txt" >&2
-fi
+  if [[ -n $torch ]]; then
+    echo "PyTorch reference (the same update), tiny and cpu, 2 threads:"
+    "$bin/common_agent_bench" --preset tiny --threads 2 --iters 20 --precision "$best" --torch "$torch" \
+      > "$logs/torch-tiny.txt" 2>&1 || echo "  the tiny reference failed, see $logs/torch-tiny.txt" >&2
+    "$bin/common_agent_bench" --preset cpu --threads 2 --iters 3 --precision "$best" --torch "$torch" \
+      > "$logs/torch-cpu.txt" 2>&1 || echo "  the cpu reference failed, see $logs/torch-cpu.txt" >&2
+  fi
 
-if ((service)); then
-  echo "service at replay ratio 32 (tiny: 1 and 2 actors, 30 s windows; cpu: 1 actor, 90 s):"
-  "$bin/learner_service_bench" --presets tiny cpu --modes limited --cpu-modes limited \
-    --actors 1 2 --window-s 30 --cpu-window-s 90 > "$logs/service.txt" 2>&1 ||
-    echo "  the service bench failed, see $logs/service.txt" >&2
+  if ((service)); then
+    echo "service at replay ratio 32 (tiny: 1 and 2 actors, 30 s windows; cpu: 1 actor, 90 s):"
+    "$bin/learner_service_bench" --presets tiny cpu --modes limited --cpu-modes limited \
+      --actors 1 2 --window-s 30 --cpu-window-s 90 > "$logs/service.txt" 2>&1 ||
+      echo "  the service bench failed, see $logs/service.txt" >&2
+  fi
+  # The logs name this checkout's files relative to it, so that a report can be committed.
+  sed -i "s#$root/##g" "$logs"/*.txt
 fi
-# The logs name this checkout's files relative to it, so that a report can be committed.
-sed -i "s#$root/##g" "$logs"/*.txt
-fi  # measurements
 
 # ---- report ----
 csv="$out/figures.csv"

@@ -237,12 +237,8 @@ TEST(Evaluator, ARunDirectoryAsTheSnapshotMeansItsFinalSnapshot) {
   }
   const auto empty = dir.path() / "empty-run";
   std::filesystem::create_directories(empty);
-  std::string message;
-  try {
-    Evaluator evaluator(evaluate(empty), 0, 1);
-  } catch (const EvalError& error) {
-    message = error.what();
-  }
+  const std::string message =
+      testing::error_of<EvalError>([&] { Evaluator evaluator(evaluate(empty), 0, 1); });
   EXPECT_NE(message.find("without a final-snapshot.params"), std::string::npos) << message;
   EXPECT_NE(message.find("eval/snapshot-v<N>.params"), std::string::npos) << message;
 }

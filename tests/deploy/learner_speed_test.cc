@@ -3,7 +3,6 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
-#include <fstream>
 
 #include "child_process.h"
 #include "testing.h"
@@ -16,10 +15,7 @@ using namespace std::chrono_literals;
 
 const fs::path kScript = fs::path(INDRIVE_SOURCE_DIR) / "deploy/experiments/learner_speed.sh";
 
-void write_text(const fs::path& path, const std::string& text) {
-  fs::create_directories(path.parent_path());
-  std::ofstream(path) << text;
-}
+using testing::write_text;
 
 // The lines of a common_agent_bench run that the report reads.
 std::string bench_log(double seconds, double gflop, double fp32_peak, double bf16_peak = 0) {

@@ -3,7 +3,6 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
-#include <fstream>
 
 #include "child_process.h"
 #include "indrive/agent/agent.h"
@@ -21,10 +20,7 @@ using namespace std::chrono_literals;
 const fs::path kSource = INDRIVE_SOURCE_DIR;
 const fs::path kBin = INDRIVE_BIN_DIR;
 
-void write_text(const fs::path& path, const std::string& text) {
-  fs::create_directories(path.parent_path());
-  std::ofstream(path) << text;
-}
+using testing::write_text;
 
 // Two metrics lines of a pretraining run, with what the summary reads.
 const std::string kPretrainMetrics =

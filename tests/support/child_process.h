@@ -44,5 +44,7 @@ class Child {
 
 // The whole text of a file ("" when it is missing).
 std::string slurp(const std::filesystem::path& path);
+// Writes `text` as the whole file, making its folders first.
+void write_text(const std::filesystem::path& path, const std::string& text);
 
 }  // namespace indrive::testing
