@@ -14,6 +14,7 @@
 #include <fstream>
 #include <thread>
 
+#include "indrive/basics/child_signals.h"
 #include "indrive/basics/log.h"
 
 namespace indrive::deploy {
@@ -101,6 +102,7 @@ void Supervisor::spawn(Child& child) {
     // Child: own process group (the launcher forwards terminal signals itself), die with the
     // launcher, stdout and stderr into the pipe.
     ::setpgid(0, 0);
+    reset_signals_for_exec();  // nothing blocked or ignored is passed on
     ::prctl(PR_SET_PDEATHSIG, SIGTERM);
     if (::getppid() != parent) ::_exit(127);
     ::dup2(fds[1], STDOUT_FILENO);

@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "indrive/basics/checksum.h"
+#include "indrive/basics/child_signals.h"
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
 #include "indrive/envserver/town.h"
@@ -95,7 +96,10 @@ int run_program(const std::vector<std::string>& argv, const fs::path& log_path) 
   for (const auto& arg : argv) args.push_back(const_cast<char*>(arg.c_str()));
   args.push_back(nullptr);
   pid_t pid = 0;
-  const int spawned = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
+  // A program that blocks its stop signals (an actor) must not pass the mask on.
+  const ChildSignals child_signals;
+  const int spawned =
+      posix_spawn(&pid, args[0], &actions, child_signals.attributes(), args.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
   if (spawned != 0) return -1;
   int status = 0;

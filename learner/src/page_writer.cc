@@ -14,6 +14,7 @@
 #include <thread>
 #include <vector>
 
+#include "indrive/basics/child_signals.h"
 #include "indrive/basics/log.h"
 
 extern char** environ;
@@ -67,7 +68,10 @@ PageWriter::PageWriter(const fs::path& program, const fs::path& run_dir, double 
   for (auto& arg : args) argv.push_back(arg.data());
   argv.push_back(nullptr);
   pid_t pid = -1;
-  const int failed = ::posix_spawn(&pid, program.c_str(), &actions, nullptr, argv.data(), environ);
+  // The learner blocks its stop signals outside their own thread: the writer gets them back.
+  const ChildSignals child_signals;
+  const int failed = ::posix_spawn(&pid, program.c_str(), &actions, child_signals.attributes(),
+                                   argv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
   ::close(fds[0]);
   if (failed != 0) {

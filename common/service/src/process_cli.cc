@@ -1,7 +1,13 @@
 #include "indrive/service/process_cli.h"
 
+#include <pthread.h>
 #include <signal.h>
+#include <string.h>
 
+#include <filesystem>
+#include <thread>
+
+#include "indrive/basics/log.h"
 #include "indrive/dds/participant.h"
 #include "indrive/dds/security.h"
 
@@ -9,8 +15,6 @@ namespace indrive::service {
 namespace {
 
 std::atomic<bool> g_stop{false};
-
-void on_stop_signal(int) { g_stop.store(true); }
 
 // ", discovery server HOST:PORT ..." when one is set by flag, key or environment, resolved
 // here so that --check-config shows a name that does not resolve.
@@ -28,6 +32,17 @@ std::string security_summary(const ServiceConfig& config, const std::string& own
   dds::check_security_files(options.security_dir, options.security_role);
   return ", DDS Security as " + options.security_role + " from " + options.security_dir +
          " (certificate, key, permissions and governance checked)";
+}
+
+// Threads of this process now.
+std::size_t thread_count() {
+  std::error_code error;
+  std::size_t count = 0;
+  for (auto it = std::filesystem::directory_iterator("/proc/self/task", error);
+       !error && it != std::filesystem::directory_iterator(); it.increment(error)) {
+    ++count;
+  }
+  return count;
 }
 
 }  // namespace
@@ -62,12 +77,43 @@ std::string check_summary(const ServiceConfig& config, const std::string& own_ro
 }
 
 const std::atomic<bool>& install_stop_signals() {
-  struct sigaction action {};
-  action.sa_handler = on_stop_signal;
-  sigemptyset(&action.sa_mask);
-  sigaction(SIGINT, &action, nullptr);
-  sigaction(SIGTERM, &action, nullptr);
+  // A handler would run on whichever thread the kernel picks, on that thread's stack pointer,
+  // and oneDNN 2.6's jit sgemm points the stack pointer at a heap workspace while it runs (K
+  // blocks over 252 on AVX2 and AVX-512; fixed upstream in oneDNN 3.11): the signal frame then
+  // lands on the heap below the workspace and corrupts it, and the process aborts later in
+  // malloc. So the signals are blocked here, before the program starts any thread, which
+  // every later thread inherits, and are taken by sigwait on a thread of their own (named
+  // stop-signals; while it waits, the kernel shows them unblocked in its mask).
+  static const bool installed = [] {
+    if (const std::size_t threads = thread_count();
+        threads > 1 && !stop_signals_blocked_before_libraries()) {
+      INDRIVE_LOG(kWarn, "process")
+          << threads - 1 << " thread(s) started before the stop signals were installed may "
+          << "still take SIGINT or SIGTERM (call install_stop_signals() first in main, and link "
+             "the program with indrive::stop_signals_preinit)";
+    }
+    sigset_t stops;
+    sigemptyset(&stops);
+    sigaddset(&stops, SIGINT);
+    sigaddset(&stops, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &stops, nullptr);
+    std::thread([stops] {
+      pthread_setname_np(pthread_self(), "stop-signals");
+      for (;;) {
+        int signal = 0;
+        if (sigwait(&stops, &signal) != 0) continue;
+        if (!g_stop.exchange(true)) {
+          INDRIVE_LOG(kInfo, "process") << "SIG" << sigabbrev_np(signal) << " received: stopping";
+        }
+      }
+    }).detach();
+    return true;
+  }();
+  (void)installed;
   return g_stop;
 }
+
+// The programs link the definition that says whether it worked (stop_signals_preinit.cc).
+[[gnu::weak]] bool stop_signals_blocked_before_libraries() { return false; }
 
 }  // namespace indrive::service

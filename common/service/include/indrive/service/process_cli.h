@@ -22,7 +22,17 @@ void add_service_options(CLI::App& app, ServiceOptions& options, std::string& lo
 // signed. Printed by --check-config, which validates a command line without starting anything.
 std::string check_summary(const ServiceConfig& config, const std::string& own_role);
 
-// Installs SIGINT/SIGTERM handlers that set the returned flag (once per process).
+// The flag SIGINT and SIGTERM set (installed once per process; call it first in main, before
+// any thread starts). The signals are blocked in the calling thread, and so in every thread it
+// starts later, and taken by sigwait on a thread of their own, never by a handler on a
+// computing thread: oneDNN 2.6's jit sgemm moves the stack pointer into a heap workspace, where
+// a signal frame corrupts the heap (process_cli.cc). Children spawned by these programs get
+// their signals back with ChildSignals (indrive/basics/child_signals.h).
 const std::atomic<bool>& install_stop_signals();
+
+// Whether the program blocked SIGINT and SIGTERM before its shared libraries' constructors ran
+// (src/stop_signals_preinit.cc, linked into the programs through indrive::stop_signals_preinit;
+// false in anything else).
+bool stop_signals_blocked_before_libraries();
 
 }  // namespace indrive::service
