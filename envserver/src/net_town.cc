@@ -93,6 +93,7 @@ int run_program(const std::vector<std::string>& argv, const fs::path& log_path) 
                                    O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
   std::vector<char*> args;
+  args.reserve(argv.size() + 1);
   for (const auto& arg : argv) args.push_back(const_cast<char*>(arg.c_str()));
   args.push_back(nullptr);
   pid_t pid = 0;
@@ -135,7 +136,7 @@ fs::path convert_cached(const std::string& stem, const std::vector<fs::path>& in
   char hex[9];
   std::snprintf(hex, sizeof hex, "%08x", hash);
   const fs::path dir = cache_dir(options);
-  const fs::path output = dir / (stem + "-" + hex + ".net.xml");
+  fs::path output = dir / (stem + "-" + hex + ".net.xml");
   std::error_code ec;
   if (fs::is_regular_file(output, ec)) return output;
 
@@ -244,7 +245,7 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
     return convert_cached("grid" + std::to_string(seed), {}, argv, options);
   }
 
-  const fs::path path(spec);
+  fs::path path(spec);
   if (ends_with(spec, ".net.xml")) {
     if (!fs::is_regular_file(path, ec)) {
       throw MapError("road network file '" + spec + "' does not exist; give " + known_specs());

@@ -65,6 +65,7 @@ PageWriter::PageWriter(const fs::path& program, const fs::path& run_dir, double 
                                    run_dir.string(),        "--watch",
                                    number_text(interval_s), "--until-eof"};
   std::vector<char*> argv;
+  argv.reserve(args.size() + 1);
   for (auto& arg : args) argv.push_back(arg.data());
   argv.push_back(nullptr);
   pid_t pid = -1;

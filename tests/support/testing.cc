@@ -116,4 +116,23 @@ void allow_publishing(const std::filesystem::path& dir, const std::string& role,
   if (std::system(sign.c_str()) != 0) throw std::runtime_error("'" + sign + "' failed");
 }
 
+std::vector<ThreadSignals> thread_signals(int pid) {
+  namespace fs = std::filesystem;
+  const fs::path tasks =
+      fs::path("/proc") / (pid == 0 ? std::string("self") : std::to_string(pid)) / "task";
+  std::vector<ThreadSignals> threads;
+  std::error_code error;
+  for (auto it = fs::directory_iterator(tasks, error); !error && it != fs::directory_iterator();
+       it.increment(error)) {
+    std::ifstream status(it->path() / "status");
+    ThreadSignals thread;
+    for (std::string line; std::getline(status, line);) {
+      if (line.rfind("Name:", 0) == 0) thread.name = line.substr(line.find_first_not_of(" \t", 5));
+      if (line.rfind("SigBlk:", 0) == 0) thread.blocked = std::stoull(line.substr(7), nullptr, 16);
+    }
+    threads.push_back(thread);
+  }
+  return threads;
+}
+
 }  // namespace indrive::testing

@@ -1,6 +1,7 @@
 // Shared test fixtures.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -23,6 +24,16 @@ class TempDir {
 // A DDS domain id that no other test process running at the same time uses, so parallel
 // ctest runs never cross-talk. All processes of one test share the id their parent picked.
 int unique_domain_id();
+
+// A thread's name and blocked-signal mask (bit N - 1 for signal N).
+struct ThreadSignals {
+  std::string name;
+  std::uint64_t blocked = 0;
+};
+
+// Every thread of process `pid` (0: this one), from /proc/PID/task/*/status; empty when the
+// process is gone.
+std::vector<ThreadSignals> thread_signals(int pid = 0);
 
 // Absolute path of a file in the source tree, e.g. source_path("deploy/dds/single_host.xml").
 std::filesystem::path source_path(const std::string& relative);

@@ -10,7 +10,6 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -80,28 +79,6 @@ TEST(ProcessCliTest, EveryProgramNamesAMistypedKey) {
   }
 }
 
-struct ThreadSignals {
-  std::string name;
-  std::uint64_t blocked = 0;
-};
-
-// Name and blocked-signal mask of each thread of process `pid`.
-std::vector<ThreadSignals> thread_signals(pid_t pid) {
-  std::vector<ThreadSignals> threads;
-  std::error_code error;
-  for (const auto& task :
-       fs::directory_iterator(fs::path("/proc") / std::to_string(pid) / "task", error)) {
-    std::ifstream status(task.path() / "status");
-    ThreadSignals thread;
-    for (std::string line; std::getline(status, line);) {
-      if (line.rfind("Name:", 0) == 0) thread.name = line.substr(line.find_first_not_of(" \t", 5));
-      if (line.rfind("SigBlk:", 0) == 0) thread.blocked = std::stoull(line.substr(7), nullptr, 16);
-    }
-    threads.push_back(thread);
-  }
-  return threads;
-}
-
 // Signals run no handler on a computing thread (process_cli.h, install_stop_signals): while
 // each program runs, every thread of it blocks SIGINT and SIGTERM (those started before main
 // by a shared library too, e.g. OpenBLAS's pool where it is the system BLAS) except the one
@@ -127,9 +104,9 @@ TEST(ProcessCliTest, EveryProgramTakesItsStopSignalsOnOneThreadOnly) {
     }
     ASSERT_NE(testing::slurp(log).find(running[p]), std::string::npos) << testing::slurp(log);
     std::this_thread::sleep_for(2s);  // its computing threads start with the first products
-    const std::vector<ThreadSignals> threads = thread_signals(child.pid());
+    const std::vector<testing::ThreadSignals> threads = testing::thread_signals(child.pid());
     int takers = 0;
-    for (const ThreadSignals& thread : threads) {
+    for (const testing::ThreadSignals& thread : threads) {
       if (thread.name == "stop-signals") {
         ++takers;
         continue;

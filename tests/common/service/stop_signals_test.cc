@@ -17,8 +17,6 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <memory>
 #include <string>
 #include <thread>
@@ -26,32 +24,12 @@
 
 #include "indrive/nn/nn.h"
 #include "indrive/service/process_cli.h"
+#include "testing.h"
 
 namespace indrive::service {
 namespace {
 
-namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
-
-struct ThreadMask {
-  std::string name;
-  std::uint64_t blocked = 0;
-};
-
-// The name and blocked-signal mask of each thread of this process (/proc/self/task/*/status).
-std::vector<ThreadMask> thread_masks() {
-  std::vector<ThreadMask> threads;
-  for (const auto& task : fs::directory_iterator("/proc/self/task")) {
-    std::ifstream status(task.path() / "status");
-    ThreadMask thread;
-    for (std::string line; std::getline(status, line);) {
-      if (line.rfind("Name:", 0) == 0) thread.name = line.substr(line.find_first_not_of(" \t", 5));
-      if (line.rfind("SigBlk:", 0) == 0) thread.blocked = std::stoull(line.substr(7), nullptr, 16);
-    }
-    threads.push_back(thread);
-  }
-  return threads;
-}
 
 constexpr std::uint64_t bit(int signal) { return std::uint64_t{1} << (signal - 1); }
 
@@ -89,11 +67,11 @@ TEST(StopSignals, EveryThreadBlocksThemAndTheirOwnThreadTakesThem) {
   ASSERT_TRUE(product_is_right());  // starts the engine's second thread
   std::thread later([] { std::this_thread::sleep_for(std::chrono::milliseconds(200)); });
   EXPECT_TRUE(stop_signals_blocked_before_libraries());
-  const std::vector<ThreadMask> threads = thread_masks();
+  const std::vector<testing::ThreadSignals> threads = testing::thread_signals();
   // This thread, the one started before main, the signal thread, the engine's and `later`.
   EXPECT_GE(threads.size(), 5u);
   int signal_threads = 0, before_main = 0;
-  for (const ThreadMask& thread : threads) {
+  for (const testing::ThreadSignals& thread : threads) {
     before_main += thread.name == "before-main";
     // The signal thread waits in sigwait, during which the kernel unblocks what it waits for.
     if (thread.name == "stop-signals") {
@@ -126,6 +104,7 @@ TEST(StopSignals, ProductsSurviveAStormOfThem) {
       // Small blocks taken and given back around the products' workspaces, as a program's
       // other work does: what a misplaced signal frame would overwrite.
       std::vector<std::unique_ptr<char[]>> blocks;
+      blocks.reserve(16);
       for (int i = 0; i < 16; ++i) blocks.emplace_back(new char[48 + 100 * i]);
     }
     nn::current_graph().release_memory();
