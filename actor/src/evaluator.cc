@@ -23,23 +23,12 @@
 #include "indrive/basics/run_dir.h"
 #include "indrive/dds/participant.h"
 #include "indrive/dds/security.h"
+#include "text.h"
 
 namespace indrive::actor {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-std::vector<std::string> split_list(const std::string& text) {
-  std::vector<std::string> items;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) {
-    const auto begin = item.find_first_not_of(' ');
-    const auto end = item.find_last_not_of(' ');
-    if (begin != std::string::npos) items.push_back(item.substr(begin, end - begin + 1));
-  }
-  return items;
-}
 
 // What one finished episode gives.
 // Appends learning-curve rows, writing the header first when the file is new.
@@ -76,7 +65,9 @@ const std::string& curve_csv_header() {
 ProtocolGrid protocol_grid(const config::Config& config) {
   ProtocolGrid grid;
   grid.towns = split_list(config.get<std::string>("eval.towns"));
-  grid.routes = split_list(config.get<std::string>("eval.routes"));
+  env::TownOptions town_options;
+  town_options.route_set = config.get<std::string>("env.route_set");
+  set_grid_routes(grid, config.get<std::string>("eval.routes"), town_options);
   grid.densities.clear();
   for (double density : config.get<std::vector<double>>("eval.densities")) {
     grid.densities.push_back(static_cast<int>(density));
@@ -151,7 +142,9 @@ struct Evaluator::Impl {
                               c.get<double>("actor.rejoin_max_s"));
       connect();
     }
-    env::EnvConfig env_config = protocol_env_config(actor::env_config(service, agent_config));
+    env::EnvConfig env_config =
+        protocol_env_config(actor::env_config(service, agent_config),
+                            parse_protocol(service.config().get<std::string>("eval.protocol")));
     env_config.town = grid.towns.front();
     env = std::make_unique<env::Env>(env_config);
   }

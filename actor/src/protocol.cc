@@ -19,9 +19,26 @@ void require_unique(const std::vector<T>& values, const std::string& what) {
 
 }  // namespace
 
+const char* protocol_name(EvalProtocol protocol) {
+  return protocol == EvalProtocol::kIndriveCode ? "indrive_code" : "strict";
+}
+
+EvalProtocol parse_protocol(const std::string& name) {
+  if (name == "strict") return EvalProtocol::kStrict;
+  if (name == "indrive_code") return EvalProtocol::kIndriveCode;
+  throw EvalError("unknown evaluation protocol '" + name +
+                  "'; give strict (ours) or indrive_code (the public InDRiVE code's rules)");
+}
+
+const std::vector<std::string>& ProtocolGrid::routes_of(const std::string& town) const {
+  const auto it = town_routes.find(town);
+  return it != town_routes.end() ? it->second : routes;
+}
+
 void ProtocolGrid::validate() const {
   require_unique(towns, "towns");
   require_unique(routes, "routes");
+  for (const auto& [town, names] : town_routes) require_unique(names, town + " routes");
   require_unique(densities, "densities");
   for (const int density : densities) {
     if (density != 5 && density != 10 && density != 20) {
@@ -36,7 +53,9 @@ void ProtocolGrid::validate() const {
 }
 
 int ProtocolGrid::size() const {
-  return static_cast<int>(towns.size() * routes.size() * densities.size()) * episodes_per_cell;
+  std::size_t cells = 0;
+  for (const auto& town : towns) cells += routes_of(town).size() * densities.size();
+  return static_cast<int>(cells) * episodes_per_cell;
 }
 
 std::vector<EpisodeSpec> ProtocolGrid::all_episodes() const {
@@ -44,7 +63,7 @@ std::vector<EpisodeSpec> ProtocolGrid::all_episodes() const {
   std::vector<EpisodeSpec> episodes;
   episodes.reserve(static_cast<std::size_t>(size()));
   for (const auto& town : towns) {
-    for (const auto& route : routes) {
+    for (const auto& route : routes_of(town)) {
       for (const int density : densities) {
         for (int i = 0; i < episodes_per_cell; ++i) {
           episodes.push_back({.town = town,

@@ -11,8 +11,10 @@ namespace indrive::actor {
 
 ProtocolEpisodeOptions protocol_episode_options(const config::Config& config,
                                                 const std::filesystem::path& video_dir) {
-  return {.budget_speed_mps = config.get<double>("eval.budget_speed_mps"),
+  return {.protocol = parse_protocol(config.get<std::string>("eval.protocol")),
+          .budget_speed_mps = config.get<double>("eval.budget_speed_mps"),
           .budget_slack = config.get<double>("eval.budget_slack"),
+          .code_budget_steps = config.get<int>("eval.indrive_code_budget_steps"),
           .video_episodes = config.get<int>("eval.video_episodes"),
           .video_dir = video_dir};
 }
@@ -27,8 +29,14 @@ EpisodeOutcome run_protocol_episode(env::Env& env, EpisodePolicy& policy, const 
                                     .spawn_seed = static_cast<std::uint64_t>(spec.spawn_seed)});
   const env::Route* route = env.route();
   INDRIVE_CHECK(route != nullptr) << "an evaluation reset must place the ego on its route";
+  const bool code_rules = env.config().events.rules == env::EventRules::kIndriveCode;
+  INDRIVE_CHECK(code_rules == (options.protocol == EvalProtocol::kIndriveCode))
+      << "the env's event rules are not those of protocol " << protocol_name(options.protocol)
+      << " (build it with protocol_env_config)";
   const int budget =
-      route_step_budget(route->length_m(), options.budget_speed_mps, options.budget_slack);
+      options.protocol == EvalProtocol::kIndriveCode
+          ? options.code_budget_steps
+          : route_step_budget(route->length_m(), options.budget_speed_mps, options.budget_slack);
   policy.begin(env, spec);
   std::optional<EpisodeVideo> video;
   if (spec.episode < options.video_episodes) {
@@ -48,13 +56,18 @@ EpisodeOutcome run_protocol_episode(env::Env& env, EpisodePolicy& policy, const 
   outcome.steps = step.step;
   outcome.route_completion =
       route_completion(step.route_progress_m, route->length_m(), outcome.events);
+  outcome.lane_invasions = env.events().lane_invasions();
+  outcome.protocol = options.protocol;
   if (video) video->finish(outcome.events, budget_ran_out);
   return outcome;
 }
 
 EpisodeRecord protocol_record(const EpisodeSpec& spec, const EpisodeOutcome& outcome) {
-  return protocol_record(spec, outcome.events, outcome.steps, outcome.route_completion,
-                         outcome.episode_return);
+  EpisodeRecord record = protocol_record(spec, outcome.events, outcome.steps,
+                                         outcome.route_completion, outcome.episode_return);
+  record.protocol = protocol_name(outcome.protocol);
+  record.lane_invasions = outcome.lane_invasions;
+  return record;
 }
 
 }  // namespace indrive::actor

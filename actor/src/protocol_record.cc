@@ -21,13 +21,40 @@ void check_grid_names(const ProtocolGrid& grid) {
                       join(builtin) + "), a path to a .net.xml or .xodr map, or grid:<seed>");
     }
   }
-  for (const std::string& route : grid.routes) {
-    if (std::find(env::kRouteNames.begin(), env::kRouteNames.end(), route) ==
-        env::kRouteNames.end()) {
-      std::vector<std::string> names(env::kRouteNames.begin(), env::kRouteNames.end());
-      throw EvalError("unknown evaluation route '" + route + "'; every town has " + join(names));
+  for (const std::string& town : grid.towns) {
+    std::vector<std::string> names;
+    try {
+      names = env::town_route_names(town);
+    } catch (const std::exception& error) {
+      throw EvalError("evaluation town '" + town + "': " + error.what());
+    }
+    for (const std::string& route : grid.routes_of(town)) {
+      if (std::find(names.begin(), names.end(), route) == names.end()) {
+        throw EvalError("unknown evaluation route '" + route + "' on " + town + "; it has " +
+                        join(names) + " (eval.routes: all takes every town's own routes)");
+      }
     }
   }
+}
+
+void set_grid_routes(ProtocolGrid& grid, const std::string& routes,
+                     const env::TownOptions& options) {
+  grid.town_routes.clear();
+  if (routes != "all") {
+    grid.routes = split_list(routes);
+    return;
+  }
+  grid.routes.clear();
+  for (const std::string& town : grid.towns) {
+    try {
+      grid.town_routes[town] = env::town_route_names(town, options);
+    } catch (const std::exception& error) {
+      throw EvalError("evaluation town '" + town + "': " + error.what());
+    }
+  }
+  // Towns that share a route list (our two, any derived one) could have used `routes`; the
+  // per-town map says the same and keeps one rule.
+  if (!grid.towns.empty()) grid.routes = grid.town_routes[grid.towns.front()];
 }
 
 int route_step_budget(double length_m, double speed_mps, double slack, double dt_s) {
@@ -43,8 +70,10 @@ double route_completion(double progress_m, double length_m, std::uint32_t events
   return std::clamp(progress_m / length_m, 0.0, 1.0);
 }
 
-env::EnvConfig protocol_env_config(env::EnvConfig config) {
+env::EnvConfig protocol_env_config(env::EnvConfig config, EvalProtocol protocol) {
   config.events.time_limit_steps = std::numeric_limits<int>::max() / 2;
+  config.events.rules = protocol == EvalProtocol::kIndriveCode ? env::EventRules::kIndriveCode
+                                                               : env::EventRules::kStrict;
   return config;
 }
 

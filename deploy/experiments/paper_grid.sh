@@ -29,6 +29,10 @@
 # OMP_WAIT_POLICY=passive unless they are set), and start them from one session (one shell,
 # `&`): with the kernel's autogroup scheduling each session gets an equal CPU share, so a chain
 # started alone under setsid ran at 0.9 core beside three that shared the other.
+# --towns carla runs the chain on CARLA's towns instead of ours: pretraining on carla_town01,
+# few-shot on its routes, every evaluation on carla_town01 and carla_town02 twice, under the
+# strict protocol (<stage>/) and under the public InDRiVE code's (<stage>-code/, budget
+# --code-budget steps); the report then holds both protocols' tables.
 # Options: --out DIR (runs/paper-grid), --preset P (tiny), --pretrain-steps N (100000),
 # --task-steps N (10000), --episodes N per town x route x density (5), --stages "pretrain
 # zeroshot fewshot" (a chain's stages), --task T (dreamer's task; a chain's fewshot then does
@@ -59,8 +63,10 @@ extra=()
 page=""
 snapshot_seeds=0
 trained_in=""
+towns=ours
+code_budget=30000
 
-usage() { sed -n '2,41p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,45p' "$0" | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
@@ -83,6 +89,8 @@ while [[ $# -gt 0 ]]; do
     --page) page=$2; shift 2 ;;
     --snapshot-seeds) snapshot_seeds=$2; shift 2 ;;
     --trained-in) trained_in=$2; shift 2 ;;
+    --towns) towns=$2; shift 2 ;;
+    --code-budget) code_budget=$2; shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -93,6 +101,10 @@ esac
 case $route_set in right|left) ;; *)
   echo "--route-set must be right or left, got '$route_set'" >&2; exit 2 ;;
 esac
+case $towns in ours|carla) ;; *)
+  echo "--towns must be ours (town01, town02) or carla (carla_town01, carla_town02), got '$towns'" >&2; exit 2 ;;
+esac
+[[ $code_budget =~ ^[1-9][0-9]*$ ]] || { echo "--code-budget must be a positive step count, got '$code_budget'" >&2; exit 2; }
 case $task in lane_following|collision_avoidance) ;; *)
   echo "--task must be lane_following or collision_avoidance, got '$task'" >&2; exit 2 ;;
 esac
@@ -105,8 +117,17 @@ export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-
 say() { printf '\033[1m[grid %s]\033[0m %s\n' "$(date +%H:%M:%S)" "$*"; }
 seed_dir="$out/s$seed"
 mkdir -p "$seed_dir"
-common=(--set "preset=$preset" --set "run.seed=$seed" --set "env.route_set=$route_set"
-  ${extra[@]+"${extra[@]}"})
+common=(--set "preset=$preset" --set "run.seed=$seed" --set "env.route_set=$route_set")
+eval_towns=town01,town02
+task_routes=()  # the configs' own: town01's four
+if [[ $towns == carla ]]; then
+  eval_towns=carla_town01,carla_town02
+  common+=(--set "env.town=carla_town01")
+  # Few-shot and DreamerV3 train on every route of the training town, as on ours.
+  task_routes=(--set "env.route=$(sed -n 's/^\([a-z_0-9]*\):$/\1/p' \
+    "$root/envserver/data/routes/carla_town01.routes.yaml" | paste -sd, -)")
+fi
+common+=(${extra[@]+"${extra[@]}"})
 short() { [[ $1 == lane_following ]] && echo lf || echo ca; }
 config_of() { # phase task -> config file
   case $1 in
@@ -142,8 +163,20 @@ train() { # run_dir config steps [--set ...]
   touch "$dir/DONE"
 }
 
-# Evaluates a snapshot file (or the random policy) on the grid with two evaluators.
+# Evaluates a snapshot file (or the random policy) on the grid with two evaluators; on the
+# CARLA towns once per protocol (strict into eval_dir, indrive_code into eval_dir-code).
 evaluate() { # eval_dir kind snapshot|random [--set ...]: the method and task the rows carry
+  if [[ $towns == carla ]]; then
+    local dir=$1
+    shift
+    evaluate_once "$dir" "$@" --set eval.protocol=strict
+    evaluate_once "$dir-code" "$@" --set eval.protocol=indrive_code \
+      --set "eval.indrive_code_budget_steps=$code_budget"
+  else
+    evaluate_once "$@"
+  fi
+}
+evaluate_once() { # as evaluate
   local dir=$1 kind=$2 source=$3
   shift 3
   if done_mark "$dir"; then say "$dir done already"; return; fi
@@ -155,7 +188,7 @@ evaluate() { # eval_dir kind snapshot|random [--set ...]: the method and task th
   for j in 0 1; do
     "$bin/indrive-actor" --evaluate "${policy[@]}" --run-dir "$dir" --id "$j" --of 2 \
       --set "preset=$preset" --set "run.seed=$seed" --set "eval.kind=$kind" \
-      --set "eval.episodes_per_cell=$episodes" --set "eval.towns=town01,town02" \
+      --set "eval.episodes_per_cell=$episodes" --set "eval.towns=$eval_towns" \
       --set "env.route_set=$route_set" \
       "$@" --log-level warn > "$dir/evaluator-$j.log" 2>&1 &
     pids+=($!)
@@ -186,7 +219,8 @@ case $command in
         ckpt=$(ls "$pre"/checkpoints/ckpt-*.bin | sort -V | tail -n 1)
         # agent.intrinsic.method: the checkpoint's module, not the config's.
         train "$ft" "$(config_of finetune "$t")" "$task_steps" --set "learner.init_checkpoint=$ckpt" \
-          --set "agent.intrinsic.method=$method" --set "learner.replay_ratio=$fewshot_ratio"
+          --set "agent.intrinsic.method=$method" --set "learner.replay_ratio=$fewshot_ratio" \
+          ${task_routes[@]+"${task_routes[@]}"}
         evaluate "$seed_dir/fewshot-$(short "$t")-$method" few_shot "$ft/snapshot.params" \
           --set "agent.intrinsic.method=$method" --set "agent.task=$t"
       done
@@ -196,7 +230,7 @@ case $command in
     total=$((pretrain_steps + task_steps))
     d="$seed_dir/dreamer-$(short "$task")"
     say "DreamerV3 from scratch on $task seed $seed, $total env steps"
-    train "$d" "$(config_of dreamer "$task")" "$total"
+    train "$d" "$(config_of dreamer "$task")" "$total" ${task_routes[@]+"${task_routes[@]}"}
     evaluate "$seed_dir/fewshot-$(short "$task")-dreamer" few_shot "$d/snapshot.params" \
       --set "agent.phase=dreamer" --set "agent.task=$task"
     ;;

@@ -22,7 +22,16 @@ const std::vector<std::string> kPaperRouteOrder = {"straight", "right_loop", "le
 // Every failure event of envserver/events.h (event_name), in bit order.
 const std::vector<std::string> kFailureOrder = {"collision", "lane_invasion", "wrong_direction",
                                                 "off_road",  "stall",         "time_limit",
-                                                "off_route"};
+                                                "off_route", "out_of_lane",   "too_slow"};
+
+// Where a route not in kPaperRouteOrder sorts: by its kind, read off its name's start.
+int kind_rank(const std::string& route) {
+  const std::vector<std::string> kinds = {"straight", "right", "left", "two_turn"};
+  for (std::size_t i = 0; i < kinds.size(); ++i) {
+    if (route.starts_with(kinds[i])) return static_cast<int>(i);
+  }
+  return static_cast<int>(kinds.size());
+}
 
 // Two-sided 97.5% quantile of Student's t for `dof` degrees of freedom.
 double t_quantile_975(int dof) {
@@ -62,10 +71,13 @@ std::string fixed(double value, int digits = 1) {
 }
 
 std::string title_of(const TableKey& key) {
+  const std::string rules = key.protocol == "indrive_code"
+                                ? " (protocol indrive_code: the public InDRiVE code's rules)"
+                                : " (protocol " + key.protocol + ")";
   if (key.eval_kind == "zero_shot")
-    return "Zero-shot: " + key.task + " policy, all parameters frozen";
-  if (key.eval_kind == "few_shot") return "Few-shot: " + key.task;
-  return key.eval_kind + ": " + key.task;
+    return "Zero-shot: " + key.task + " policy, all parameters frozen" + rules;
+  if (key.eval_kind == "few_shot") return "Few-shot: " + key.task + rules;
+  return key.eval_kind + ": " + key.task + rules;
 }
 
 // The stats of one cell, or nullptr when that method never ran that town and route.
@@ -87,6 +99,17 @@ void push_unique(std::vector<std::string>& list, const std::string& value) {
 }
 
 }  // namespace
+
+std::optional<double> paper_zero_shot_average(const std::string& method, const std::string& town) {
+  // InDRiVE's zero-shot averages over routes, Town01 / Town02 (its abstract's tables).
+  static const std::map<std::string, std::pair<double, double>> paper = {
+      {"disag", {75.65, 73.20}}, {"icm", {62.58, 48.61}}, {"rnd", {68.58, 55.83}}};
+  const auto it = paper.find(method);
+  if (it == paper.end()) return std::nullopt;
+  if (town == "carla_town01") return it->second.first;
+  if (town == "carla_town02") return it->second.second;
+  return std::nullopt;
+}
 
 std::pair<double, double> wilson_interval(int successes, int n) {
   if (n <= 0) return {0.0, 100.0};
@@ -113,9 +136,9 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
       std::map<std::string,
                std::map<std::string, std::map<std::string, std::map<int, std::map<int, Count>>>>>>
       counts;
-  std::set<std::string> other_routes;
+  std::set<std::pair<int, std::string>> other_routes;  // (kind rank, name)
   for (const auto& r : records) {
-    const TableKey key{r.eval_kind, r.task};
+    const TableKey key{r.protocol, r.eval_kind, r.task};
     Table& table = report.tables[key];
     push_unique(table.methods, r.method);
     push_unique(table.towns, r.town);
@@ -131,7 +154,7 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
     }
     if (std::find(kPaperRouteOrder.begin(), kPaperRouteOrder.end(), r.route) ==
         kPaperRouteOrder.end()) {
-      other_routes.insert(r.route);
+      other_routes.emplace(kind_rank(r.route), r.route);
     }
   }
   for (auto& [key, table] : report.tables) {
@@ -144,7 +167,7 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
     for (const auto& route : kPaperRouteOrder) {
       if (present.count(route)) table.routes.push_back(route);
     }
-    for (const auto& route : other_routes) {
+    for (const auto& [rank, route] : other_routes) {
       if (present.count(route)) table.routes.push_back(route);
     }
     for (const auto& [method, towns] : counts[key]) {
@@ -310,8 +333,8 @@ TownChoices route_choices_of(const Report& report, const std::string& route_set)
   return choices;
 }
 
-std::string render_markdown(const Report& report, const std::string& seen_town,
-                            const std::string& heldout_town, const TownChoices& choices,
+std::string render_markdown(const Report& report, const std::string& seen_name,
+                            const std::string& heldout_name, const TownChoices& choices,
                             const std::string& route_set) {
   std::ostringstream md;
   md << "# Results\n\n"
@@ -347,6 +370,15 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
     // Averages over routes and the generalisation gap.
     md << "\n### Average SR over routes\n\n| method |";
     for (const auto& town : table.towns) md << " " << town << " |";
+    // The gap between the towns named, or between their CARLA namesakes in a table of CARLA
+    // towns only (town01 -> carla_town01).
+    const auto holds = [&](const std::string& town) {
+      return std::find(table.towns.begin(), table.towns.end(), town) != table.towns.end();
+    };
+    const bool carla_pair = !holds(seen_name) && !holds(heldout_name) &&
+                            holds("carla_" + seen_name) && holds("carla_" + heldout_name);
+    const std::string seen_town = carla_pair ? "carla_" + seen_name : seen_name;
+    const std::string heldout_town = carla_pair ? "carla_" + heldout_name : heldout_name;
     const bool has_gap =
         std::find(table.towns.begin(), table.towns.end(), seen_town) != table.towns.end() &&
         std::find(table.towns.begin(), table.towns.end(), heldout_town) != table.towns.end();
@@ -401,8 +433,32 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
       if (several_seeds) md << " " << per_seed_averages(table, method) << " |";
       md << "\n";
     }
+    if (key.eval_kind == "zero_shot") {
+      // The paper's own averages, in the columns of its towns.
+      for (const auto& method : table.methods) {
+        bool any = false;
+        for (const auto& town : table.towns) any = any || paper_zero_shot_average(method, town);
+        if (!any) continue;
+        md << "| *paper, " << method << "* |";
+        for (const auto& town : table.towns) {
+          const auto value = paper_zero_shot_average(method, town);
+          md << " " << (value ? fixed(*value, 2) : std::string("-")) << " |";
+        }
+        if (has_gap) {
+          const auto seen = paper_zero_shot_average(method, seen_town);
+          const auto held = paper_zero_shot_average(method, heldout_town);
+          md << " " << (seen && held ? fixed(*seen - *held, 2) : std::string("-")) << " |";
+        }
+        if (several_seeds) md << " |";
+        md << "\n";
+      }
+    }
+    // The layout bound is a bound of the strict rules (the route's own exits); under
+    // indrive_code a policy may reach the end point by any path.
     bool any_bound = false;
-    for (const auto& town : table.towns) any_bound = any_bound || choices.count(town) > 0;
+    for (const auto& town : table.towns) {
+      any_bound = any_bound || (key.protocol == "strict" && choices.count(town) > 0);
+    }
     if (any_bound) {
       // Over the routes this table holds: the share one layout -> exit rule follows.
       md << "| *layout bound* |";
@@ -502,7 +558,8 @@ std::string render_markdown(const Report& report, const std::string& seen_town,
 
 std::string render_csv(const Report& report) {
   std::ostringstream csv;
-  csv << "eval_kind,task,method,town,route,seeds,episodes,successes,sr,fr,ci_low,ci_high,rc\n";
+  csv << "protocol,eval_kind,task,method,town,route,seeds,episodes,successes,sr,fr,ci_low,ci_high,"
+         "rc\n";
   for (const auto& [key, table] : report.tables) {
     for (const auto& method : table.methods) {
       for (const auto& town : table.towns) {
@@ -510,10 +567,10 @@ std::string render_csv(const Report& report) {
           const CellStats* cell = find_cell(table, method, town, route);
           if (cell == nullptr) continue;
           const CellStats& s = *cell;
-          csv << key.eval_kind << ',' << key.task << ',' << method << ',' << town << ',' << route
-              << ',' << s.seeds << ',' << s.episodes << ',' << s.successes << ',' << fixed(s.sr, 3)
-              << ',' << fixed(s.fr(), 3) << ',' << fixed(s.ci_low, 3) << ',' << fixed(s.ci_high, 3)
-              << ',' << fixed(s.rc, 3) << '\n';
+          csv << key.protocol << ',' << key.eval_kind << ',' << key.task << ',' << method << ','
+              << town << ',' << route << ',' << s.seeds << ',' << s.episodes << ',' << s.successes
+              << ',' << fixed(s.sr, 3) << ',' << fixed(s.fr(), 3) << ',' << fixed(s.ci_low, 3)
+              << ',' << fixed(s.ci_high, 3) << ',' << fixed(s.rc, 3) << '\n';
         }
       }
     }

@@ -53,6 +53,10 @@ const char* event_name(EventBit bit) {
       return "time_limit";
     case kOffRoute:
       return "off_route";
+    case kOutOfLane:
+      return "out_of_lane";
+    case kTooSlow:
+      return "too_slow";
   }
   return "unknown";
 }
@@ -96,6 +100,9 @@ EventDetector::EventDetector(const RoadNetwork& net, const EventConfig& config,
 
 void EventDetector::reset(const Route* route) {
   slow_steps_ = 0;
+  wrong_way_steps_ = 0;
+  lane_invasions_ = 0;
+  invading_ = false;
   route_ = route;
   route_edges_.assign(route != nullptr ? net_->edges().size() : 0, false);
   if (route != nullptr) {
@@ -142,10 +149,17 @@ std::uint32_t EventDetector::update(const Inputs& in) {
   // Road rules.
   road_ = road_status(in.ego.pose);
   if (!road_.drivable) bits |= kOffRoad;
+  bool invading = false;
   if (road_.lane >= 0 && !road_.in_junction) {
     const double lane_width = net_->lane(road_.lane).width_m;
     const double beyond_marking = std::abs(road_.lateral_m) + 0.5 * ego_.width_m - 0.5 * lane_width;
-    if (beyond_marking > config_.lane_invasion_overlap_m) bits |= kLaneInvasion;
+    invading = beyond_marking > config_.lane_invasion_overlap_m;
+  }
+  if (invading && !invading_) ++lane_invasions_;
+  invading_ = invading;
+  if (config_.rules == EventRules::kIndriveCode) return update_indrive_code(in, bits);
+  if (road_.lane >= 0 && !road_.in_junction) {
+    if (invading) bits |= kLaneInvasion;
     if (std::abs(road_.heading_error_rad) >
         config_.wrong_direction_deg * std::numbers::pi / 180.0) {
       bits |= kWrongDirection;
@@ -167,6 +181,47 @@ std::uint32_t EventDetector::update(const Inputs& in) {
   if (slow_steps_ * config_.dt_s >= config_.stall_time_s - 1e-9) bits |= kStall;
 
   if (in.route_finished) bits |= kDestination;
+  if (in.step >= config_.time_limit_steps) bits |= kTimeLimit;
+  return bits;
+}
+
+std::uint32_t EventDetector::update_indrive_code(const Inputs& in, std::uint32_t bits) {
+  const IndriveCodeRules& code = config_.code;
+  const Eigen::Vector2d centre(in.ego.pose.x_m, in.ego.pose.y_m);
+
+  // The nearest lane, normal or internal (the code projects onto the road): the one whose
+  // centre line is nearest relative to its width. Farther than 2 m beyond every lane's edge
+  // there is none, and the ego is out of lane.
+  const LanePosition* nearest = nullptr;
+  double nearest_fraction = INFINITY;
+  const std::vector<LanePosition> around = net_->lanes_at(centre, 2.0);
+  for (const LanePosition& at : around) {
+    const double fraction = std::abs(at.lateral_m) / net_->lane(at.lane).width_m;
+    if (fraction < nearest_fraction) {
+      nearest_fraction = fraction;
+      nearest = &at;
+    }
+  }
+  if (nearest_fraction > code.out_of_lane_fraction) bits |= kOutOfLane;
+
+  // Wrong direction: against the nearest lane (where the code's planner takes its next
+  // waypoint), fast enough, for long enough.
+  const bool wrong_way = nearest != nullptr &&
+                         in.ego.speed_mps > code.wrong_direction_min_speed_mps &&
+                         std::abs(wrap_angle(in.ego.pose.yaw_rad - nearest->heading_rad)) >
+                             code.wrong_direction_deg * std::numbers::pi / 180.0;
+  wrong_way_steps_ = wrong_way ? wrong_way_steps_ + 1 : 0;
+  if (wrong_way_steps_ >= code.wrong_direction_steps) bits |= kWrongDirection;
+
+  // Too slow, after a grace period.
+  const bool slow =
+      in.step > code.too_slow_grace_steps && in.ego.speed_mps < code.too_slow_speed_mps;
+  slow_steps_ = slow ? slow_steps_ + 1 : 0;
+  if (slow_steps_ >= code.too_slow_steps) bits |= kTooSlow;
+
+  if (route_ != nullptr && (centre - route_->destination()).norm() <= code.destination_m) {
+    bits |= kDestination;
+  }
   if (in.step >= config_.time_limit_steps) bits |= kTimeLimit;
   return bits;
 }

@@ -13,6 +13,7 @@ target_sources(indrive_envserver PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/net_draw.cc
   ${CMAKE_CURRENT_LIST_DIR}/routes_route.cc
   ${CMAKE_CURRENT_LIST_DIR}/routes_file.cc
+  ${CMAKE_CURRENT_LIST_DIR}/routes_points.cc
   ${CMAKE_CURRENT_LIST_DIR}/routes_derive.cc
   ${CMAKE_CURRENT_LIST_DIR}/routes_conflicts.cc
   ${CMAKE_CURRENT_LIST_DIR}/scene_build.cc

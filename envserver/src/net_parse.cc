@@ -149,6 +149,12 @@ RoadNetwork RoadNetwork::parse(std::string_view xml_text, std::string_view sourc
   if (!root) fail(source, "no <net> root element; this is not a SUMO .net.xml file");
 
   RoadNetwork net;
+  // <location netOffset="x,y">: what netconvert added to the source's coordinates.
+  if (const pugi::xml_attribute offset = root.child("location").attribute("netOffset")) {
+    const auto points = parse_shape(offset.value(), source, "location netOffset");
+    if (points.size() != 1) fail(source, "location netOffset must be one point \"x,y\"");
+    net.offset_ = points.front();
+  }
   // Edges and their lanes.
   for (const pugi::xml_node& edge_node : root.children("edge")) {
     const std::string function = edge_node.attribute("function").as_string("normal");

@@ -180,12 +180,27 @@ bool ends_with(const std::string& text, const std::string& suffix) {
 }
 
 std::string known_specs() {
-  return "a built-in town (town01, town02), a .net.xml file, an .xodr file or grid:<seed>";
+  return "a built-in town (town01, town02, carla_town01, carla_town02), a .net.xml file, an "
+         ".xodr file or grid:<seed>";
+}
+
+fs::path missing_builtin(const fs::path& file) {
+  throw MapError("built-in town source '" + file.string() +
+                 "' is missing; set INDRIVE_DATA_DIR to a folder that holds envserver/data/ "
+                 "(an installed share/indrive), or INDRIVE_ENV_DATA_DIR to the "
+                 "envserver/data folder itself");
 }
 
 }  // namespace
 
-std::vector<std::string> builtin_towns() { return {"town01", "town02"}; }
+std::vector<std::string> builtin_towns() {
+  return {"town01", "town02", "carla_town01", "carla_town02"};
+}
+
+bool is_builtin_town(const std::string& spec) {
+  const auto towns = builtin_towns();
+  return std::find(towns.begin(), towns.end(), spec) != towns.end();
+}
 
 fs::path resolve_town_network(const std::string& spec, const TownOptions& options) {
   const auto towns = builtin_towns();
@@ -194,15 +209,18 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
 
   if (std::find(towns.begin(), towns.end(), spec) != towns.end()) {
     const fs::path folder = data_dir(options) / "towns";
+    if (spec.starts_with("carla_")) {
+      // CARLA's own maps (towns/CARLA-LICENSE.txt), converted as any .xodr given by path.
+      const fs::path xodr = folder / (spec + ".xodr");
+      if (!fs::is_regular_file(xodr, ec)) missing_builtin(xodr);
+      std::vector<std::string> argv = {netconvert.string(), "--opendrive-files", xodr.string()};
+      argv.insert(argv.end(), kCommonOptions.begin(), kCommonOptions.end());
+      return convert_cached(spec, {xodr}, argv, options);
+    }
     const fs::path nodes = folder / (spec + ".nod.xml");
     const fs::path edges = folder / (spec + ".edg.xml");
     for (const auto& file : {nodes, edges}) {
-      if (!fs::is_regular_file(file, ec)) {
-        throw MapError("built-in town source '" + file.string() +
-                       "' is missing; set INDRIVE_DATA_DIR to a folder that holds envserver/data/ "
-                       "(an installed share/indrive), or INDRIVE_ENV_DATA_DIR to the "
-                       "envserver/data folder itself");
-      }
+      if (!fs::is_regular_file(file, ec)) missing_builtin(file);
     }
     std::vector<std::string> argv = {netconvert.string(), "--node-files", nodes.string(),
                                      "--edge-files", edges.string()};
@@ -263,18 +281,39 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
   throw MapError("unknown town '" + spec + "'; give " + known_specs());
 }
 
+namespace {
+
+// The route file of a built-in town.
+fs::path builtin_route_file(const std::string& spec, const TownOptions& options) {
+  if (!is_route_set(options.route_set)) {
+    throw MapError("unknown route set '" + options.route_set + "'; give right or left");
+  }
+  fs::path folder = data_dir(options) / "routes";
+  // The route sets are designs of our towns' routes; the CARLA towns have one set, the public
+  // InDRiVE code's routes, whatever the set.
+  if (options.route_set != kRouteSets.front() && !spec.starts_with("carla_")) {
+    folder /= options.route_set;
+  }
+  return folder / (spec + ".routes.yaml");
+}
+
+}  // namespace
+
+std::vector<std::string> town_route_names(const std::string& spec, const TownOptions& options) {
+  if (!is_builtin_town(spec)) return {kRouteNames.begin(), kRouteNames.end()};
+  std::vector<std::string> names;
+  for (const RouteSpec& route : read_route_file(builtin_route_file(spec, options))) {
+    names.push_back(route.name);
+  }
+  return names;
+}
+
 Town load_town(const std::string& spec, const TownOptions& options) {
   const fs::path net_file = resolve_town_network(spec, options);
   RoadNetwork net = RoadNetwork::load(net_file);
   std::vector<RouteSpec> specs;
-  const auto towns = builtin_towns();
-  if (std::find(towns.begin(), towns.end(), spec) != towns.end()) {
-    if (!is_route_set(options.route_set)) {
-      throw MapError("unknown route set '" + options.route_set + "'; give right or left");
-    }
-    fs::path folder = data_dir(options) / "routes";
-    if (options.route_set != kRouteSets.front()) folder /= options.route_set;
-    specs = read_route_file(folder / (spec + ".routes.yaml"));
+  if (is_builtin_town(spec)) {
+    specs = read_route_file(builtin_route_file(spec, options));
   } else {
     specs = derive_routes(net);
   }

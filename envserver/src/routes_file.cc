@@ -1,11 +1,29 @@
-// Reading and writing route files (YAML: route name -> {loop, edges}).
+// Reading and writing route files (YAML: route name -> {loop, edges} or a point-to-point
+// route's {kind, start, end}).
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <fstream>
+#include <tuple>
 
 #include "indrive/envserver/routes.h"
 
 namespace indrive::env {
+
+namespace {
+
+// A point written as [x, y] or [x, y, heading in degrees].
+Eigen::Vector2d read_point(const YAML::Node& node, const std::string& key,
+                           std::optional<double>& heading_rad) {
+  if (!node) throw RouteError("needs '" + key + "' as well");
+  if (!node.IsSequence() || (node.size() != 2 && node.size() != 3)) {
+    throw RouteError("'" + key + "' must be a point [x, y] or [x, y, heading_deg]");
+  }
+  if (node.size() == 3) heading_rad = node[2].as<double>() * M_PI / 180.0;
+  return {node[0].as<double>(), node[1].as<double>()};
+}
+
+}  // namespace
 
 std::vector<RouteSpec> read_route_file(const std::filesystem::path& path) {
   std::error_code ec;
@@ -35,15 +53,35 @@ std::vector<RouteSpec> read_route_file(const std::filesystem::path& path) {
     spec.name = entry.first.as<std::string>();
     const YAML::Node& body = entry.second;
     try {
-      if (!body.IsMap() || !body["edges"] || !body["edges"].IsSequence()) {
-        throw RouteError("needs an 'edges' list");
+      if (!body.IsMap()) throw RouteError("is not a map");
+      const bool net_points = body["start"] || body["end"];
+      const bool carla_points = body["carla_start"] || body["carla_end"];
+      if (net_points && carla_points) {
+        throw RouteError("gives both start/end and carla_start/carla_end; give one pair");
+      }
+      if (net_points || carla_points) {
+        const std::string prefix = carla_points ? "carla_" : "";
+        spec.start = read_point(body[prefix + "start"], prefix + "start", spec.start_heading_rad);
+        spec.end = read_point(body[prefix + "end"], prefix + "end", spec.end_heading_rad);
+        spec.frame = carla_points ? PointFrame::kCarla : PointFrame::kNetwork;
+        if (body["loop"] && body["loop"].as<bool>()) {
+          throw RouteError("is a loop with end points; a loop gives its edges");
+        }
+      } else if (!body["edges"] || !body["edges"].IsSequence()) {
+        throw RouteError("needs an 'edges' list or end points");
       }
       spec.loop = body["loop"] ? body["loop"].as<bool>() : false;
-      for (const auto& edge : body["edges"]) spec.edges.push_back(edge.as<std::string>());
-      if (spec.edges.empty()) throw RouteError("has an empty 'edges' list");
+      if (body["kind"]) spec.kind = body["kind"].as<std::string>();
+      if (body["edges"]) {
+        for (const auto& edge : body["edges"]) spec.edges.push_back(edge.as<std::string>());
+        if (spec.edges.empty()) throw RouteError("has an empty 'edges' list");
+      }
     } catch (const std::exception& error) {
       throw RouteError("route file '" + path.string() + "': route '" + spec.name + "' " +
-                       error.what() + " (expected {loop: bool, edges: [edge ids]})");
+                       error.what() +
+                       " (expected {loop: bool, edges: [edge ids]} or {kind: label, "
+                       "start: [x, y], end: [x, y]}, carla_start / carla_end for CARLA "
+                       "coordinates)");
     }
     specs.push_back(std::move(spec));
   }
@@ -56,7 +94,19 @@ void write_route_file(const std::filesystem::path& path, const std::vector<Route
   for (const RouteSpec& spec : specs) {
     out << YAML::Key << spec.name << YAML::Value << YAML::BeginMap;
     out << YAML::Key << "loop" << YAML::Value << spec.loop;
-    out << YAML::Key << "edges" << YAML::Value << YAML::Flow << spec.edges;
+    if (!spec.kind.empty()) out << YAML::Key << "kind" << YAML::Value << spec.kind;
+    if (spec.start && spec.end) {
+      const std::string prefix = spec.frame == PointFrame::kCarla ? "carla_" : "";
+      for (const auto& [key, point, heading] :
+           {std::tuple{"start", *spec.start, spec.start_heading_rad},
+            std::tuple{"end", *spec.end, spec.end_heading_rad}}) {
+        out << YAML::Key << prefix + key << YAML::Value << YAML::Flow << YAML::BeginSeq << point.x()
+            << point.y();
+        if (heading) out << *heading * 180.0 / M_PI;
+        out << YAML::EndSeq;
+      }
+    }
+    if (!spec.edges.empty()) out << YAML::Key << "edges" << YAML::Value << YAML::Flow << spec.edges;
     out << YAML::EndMap;
   }
   out << YAML::EndMap;

@@ -33,9 +33,36 @@ const Connection* find_connection(const RoadNetwork& net, int from, int to, int 
 
 Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : spec_(spec) {
   INDRIVE_CHECK(spacing_m > 0.0) << "waypoint spacing must be positive";
-  if (spec.edges.empty()) throw RouteError("route '" + spec.name + "' has no edges");
+  // A route given by its end points: the edges are the shortest path between them.
+  std::optional<PointPath> path;
+  if (spec.start.has_value() != spec.end.has_value()) {
+    throw RouteError("route '" + spec.name + "' gives one end point; give both start and end");
+  }
+  if (spec.start) {
+    if (spec.loop) throw RouteError("route '" + spec.name + "': a loop has no end points");
+    const bool carla = spec.frame == PointFrame::kCarla;
+    spec_.start = carla ? carla_to_network(net, *spec.start) : *spec.start;
+    spec_.end = carla ? carla_to_network(net, *spec.end) : *spec.end;
+    // CARLA's yaw turns clockwise seen from above in the network frame.
+    if (carla && spec.start_heading_rad) spec_.start_heading_rad = -*spec.start_heading_rad;
+    if (carla && spec.end_heading_rad) spec_.end_heading_rad = -*spec.end_heading_rad;
+    spec_.frame = PointFrame::kNetwork;
+    try {
+      path = route_edges_between(net, *spec_.start, *spec_.end, spec_.start_heading_rad,
+                                 spec_.end_heading_rad);
+    } catch (const RouteError& error) {
+      throw RouteError("route '" + spec.name + "': " + error.what());
+    }
+    if (!spec.edges.empty() && spec.edges != path->edges) {
+      throw RouteError("route '" + spec.name +
+                       "': its edges are not the shortest path between its end points; leave "
+                       "'edges' out to have them found");
+    }
+    spec_.edges = path->edges;
+  }
+  if (spec_.edges.empty()) throw RouteError("route '" + spec.name + "' has no edges");
   std::vector<int> edges;
-  for (const std::string& id : spec.edges) {
+  for (const std::string& id : spec_.edges) {
     const int edge = net.find_edge(id);
     if (edge < 0 || net.edge(edge).internal || net.edge(edge).lanes.empty()) {
       throw RouteError("route '" + spec.name + "': edge '" + id +
@@ -44,13 +71,13 @@ Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : 
     }
     edges.push_back(edge);
   }
-  if (spec.loop && edges.size() < 2) {
+  if (spec_.loop && edges.size() < 2) {
     throw RouteError("route '" + spec.name + "': a loop needs at least two edges");
   }
 
   // Lane sequence: each edge's lane, then the internal lanes crossing the next junction.
   const size_t hops = spec.loop ? edges.size() : edges.size() - 1;
-  int lane = net.edge(edges[0]).lanes.front();
+  int lane = path ? path->start_lane : net.edge(edges[0]).lanes.front();
   std::vector<int> edge_lanes(edges.size(), -1);
   std::vector<const Connection*> connections;
   for (size_t i = 0; i < hops; ++i) {
@@ -58,8 +85,8 @@ Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : 
     const int to = edges[(i + 1) % edges.size()];
     const Connection* connection = find_connection(net, from, to, lane);
     if (connection == nullptr) {
-      throw RouteError("route '" + spec.name + "': no connection from edge '" + spec.edges[i] +
-                       "' to edge '" + spec.edges[(i + 1) % edges.size()] +
+      throw RouteError("route '" + spec.name + "': no connection from edge '" + spec_.edges[i] +
+                       "' to edge '" + spec_.edges[(i + 1) % edges.size()] +
                        "'; consecutive edges must meet at a junction with a permitted move");
     }
     edge_lanes[i] = connection->from_lane;
@@ -91,7 +118,13 @@ Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : 
   if (spec.loop) lanes_.pop_back();
   INDRIVE_CHECK(line_.size() >= 2) << "route '" << spec.name << "' has a degenerate centre line";
   line_s_m_ = geometry::arc_lengths(line_);
-  if (!spec.loop) {
+  if (path) {
+    // From the start point's projection on the first lane to the end point's on the last
+    // (the last lane's points are its whole shape, appended last).
+    const double last_lane_s = line_s_m_.back() - net.lane(lanes_.back()).length_m;
+    const double end_s = edges.size() == 1 ? path->end_s_m : last_lane_s + path->end_s_m;
+    trim_line(path->start_s_m, std::clamp(end_s, path->start_s_m, line_s_m_.back()));
+  } else if (!spec.loop) {
     // The terminal waypoint is set back from the end of the last edge (its junction's stop
     // line), by kRouteEndSetbackM or half that edge when it is shorter. The last edge's points
     // follow the one it shares with the lane before (kept once, under that lane).
@@ -111,6 +144,7 @@ Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : 
     line_s_m_ = geometry::arc_lengths(line_);
   }
   length_m_ = line_s_m_.back();
+  destination_ = spec_.end.value_or(spec_.loop ? line_.front() : line_.back());
 
   // Waypoints evenly spread at about spacing_m; a loop does not repeat its start.
   const int intervals = std::max(1, static_cast<int>(std::lround(length_m_ / spacing_m)));
@@ -130,6 +164,32 @@ Route::Route(const RoadNetwork& net, const RouteSpec& spec, double spacing_m) : 
     waypoint.lane_width_m = line_width_m_[segment];
     waypoints_.push_back(waypoint);
   }
+}
+
+void Route::trim_line(double from_s, double to_s) {
+  std::vector<Eigen::Vector2d> line;
+  std::vector<double> width;
+  std::vector<int> lane;
+  const auto keep = [&](const Eigen::Vector2d& point, size_t segment) {
+    if (!line.empty() && (point - line.back()).norm() < 1e-3) return;
+    line.push_back(point);
+    width.push_back(line_width_m_[segment]);
+    lane.push_back(line_lane_[segment]);
+  };
+  const auto segment_of = [&](double s) {
+    const auto it = std::upper_bound(line_s_m_.begin(), line_s_m_.end(), s);
+    return std::min<size_t>(std::max<ptrdiff_t>(it - line_s_m_.begin() - 1, 0), line_.size() - 2);
+  };
+  keep(geometry::point_at(line_, line_s_m_, from_s, nullptr), segment_of(from_s));
+  for (size_t i = 0; i < line_.size(); ++i) {
+    if (line_s_m_[i] > from_s && line_s_m_[i] < to_s) keep(line_[i], std::min(i, line_.size() - 2));
+  }
+  keep(geometry::point_at(line_, line_s_m_, to_s, nullptr), segment_of(to_s));
+  INDRIVE_CHECK(line.size() >= 2) << "route '" << spec_.name << "' is shorter than 1 mm";
+  line_ = std::move(line);
+  line_width_m_ = std::move(width);
+  line_lane_ = std::move(lane);
+  line_s_m_ = geometry::arc_lengths(line_);
 }
 
 Pose2 Route::start_pose() const { return pose_at(0.0); }

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <memory>
 
 #include "indrive/actor/episode_video.h"
 #include "indrive/actor/protocol_record.h"
@@ -65,6 +66,68 @@ TEST(ProtocolEpisode, TheBudgetEndsAnEpisodeAsATimeLimitAndAStopDiscardsIt) {
 
   const std::atomic<bool> stop{true};
   EXPECT_TRUE(run_protocol_episode(env, *oracle, spec, {}, stop).stopped);
+}
+
+// The oracle drives every route of both CARLA towns to its end under both protocols (one
+// episode each, traffic density 5); the results page has the full figures.
+TEST(ProtocolEpisode, TheOracleCompletesEveryCarlaRouteUnderBothProtocols) {
+  for (const EvalProtocol protocol : {EvalProtocol::kStrict, EvalProtocol::kIndriveCode}) {
+    for (const std::string town : {"carla_town01", "carla_town02"}) {
+      env::EnvConfig config;
+      config.town = town;
+      config.camera.width = 32;
+      config.camera.height = 32;
+      env::Env env(protocol_env_config(config, protocol));
+      auto oracle = make_oracle_policy({});
+      const std::atomic<bool> go{false};
+      ProtocolGrid grid{.towns = {town}, .densities = {5}, .episodes_per_cell = 1};
+      set_grid_routes(grid, "all");
+      const ProtocolEpisodeOptions options{.protocol = protocol};
+      for (const EpisodeSpec& spec : grid.all_episodes()) {
+        const EpisodeOutcome outcome = run_protocol_episode(env, *oracle, spec, options, go);
+        const EpisodeRecord record = protocol_record(spec, outcome);
+        EXPECT_TRUE(record.success)
+            << protocol_name(protocol) << " " << town << " " << spec.route << ": "
+            << record.failure_reason << " after " << record.steps << " steps";
+        EXPECT_EQ(record.protocol, protocol_name(protocol));
+        EXPECT_EQ(record.lane_invasions, 0) << town << " " << spec.route;
+      }
+    }
+  }
+}
+
+// Under indrive_code nothing but the code's rules end an episode: random actions on a CARLA
+// route end by a failure or the budget, never by success.
+TEST(ProtocolEpisode, IndriveCodeEpisodesEndByTheCodesRulesOrItsBudget) {
+  env::EnvConfig config;
+  config.town = "carla_town02";
+  config.camera.width = 32;
+  config.camera.height = 32;
+  auto env = std::make_unique<env::Env>(protocol_env_config(config, EvalProtocol::kIndriveCode));
+  auto random = make_random_policy(5);
+  const std::atomic<bool> go{false};
+  ProtocolGrid grid{.towns = {"carla_town02"},
+                    .routes = {"straight_1"},
+                    .densities = {5},
+                    .episodes_per_cell = 3};
+  const ProtocolEpisodeOptions options{.protocol = EvalProtocol::kIndriveCode,
+                                       .code_budget_steps = 3000};
+  const std::uint32_t code_failures = env::kCollision | env::kOutOfLane | env::kOffRoad |
+                                      env::kWrongDirection | env::kTooSlow | env::kTimeLimit;
+  for (const EpisodeSpec& spec : grid.all_episodes()) {
+    const EpisodeOutcome outcome = run_protocol_episode(*env, *random, spec, options, go);
+    const EpisodeRecord record = protocol_record(spec, outcome);
+    EXPECT_FALSE(record.success);
+    EXPECT_NE(outcome.events & code_failures, 0u) << env::event_names(outcome.events);
+    EXPECT_EQ(outcome.events & (env::kLaneInvasion | env::kOffRoute | env::kStall), 0u)
+        << env::event_names(outcome.events);
+    EXPECT_LE(outcome.steps, 3000);
+  }
+  // An env built for the other protocol is refused (libsumo: one simulation per process).
+  env.reset();
+  env::Env strict_env(small_protocol_env());
+  EXPECT_DEATH(run_protocol_episode(strict_env, *random, straight_episode(0), options, go),
+               "event rules");
 }
 
 TEST(ProtocolEpisode, TheFirstEpisodesOfACellAreRecorded) {

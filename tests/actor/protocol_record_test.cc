@@ -37,6 +37,20 @@ TEST(ProtocolRecord, UnknownTownOrRouteNamesTheValueAndWhatExists) {
 
   grid = {.towns = {"town01", "town02", "grid:3"}};
   EXPECT_NO_THROW(check_grid_names(grid));
+
+  // Our four route names are no routes of the CARLA towns; "all" gives each town its own.
+  grid = {.towns = {"town01", "carla_town01"}};
+  message = eval_error_of([&] { check_grid_names(grid); });
+  EXPECT_NE(message.find("'straight' on carla_town01"), std::string::npos) << message;
+  EXPECT_NE(message.find("straight_1, straight_2, right_1"), std::string::npos) << message;
+  set_grid_routes(grid, "all");
+  EXPECT_NO_THROW(check_grid_names(grid));
+  EXPECT_EQ(grid.routes_of("town01"),
+            (std::vector<std::string>{"straight", "right_loop", "left_loop", "two_turn"}));
+  EXPECT_EQ(grid.routes_of("carla_town01").size(), 6u);
+  set_grid_routes(grid, "straight, right_loop");
+  EXPECT_EQ(grid.routes, (std::vector<std::string>{"straight", "right_loop"}));
+  EXPECT_TRUE(grid.town_routes.empty());
 }
 
 TEST(ProtocolRecord, StepBudgetIsFiveStepsPerMetreByDefault) {

@@ -68,6 +68,34 @@ TEST(ProtocolGrid, BadGridsAreClearErrors) {
   EXPECT_THROW(ProtocolGrid{}.episodes_for(2, 2), std::invalid_argument);
 }
 
+// A town's own routes (eval.routes: all): the CARLA towns have the public code's, not our four.
+TEST(ProtocolGrid, ATownsOwnRoutesReplaceTheSharedList) {
+  ProtocolGrid grid{.towns = {"town01", "carla_town02"}, .densities = {5}, .episodes_per_cell = 2};
+  grid.town_routes["carla_town02"] = {"straight_1", "left_1", "two_turn_2"};
+  EXPECT_EQ(grid.routes_of("town01").size(), 4u);
+  EXPECT_EQ(grid.size(), (4 + 3) * 2);
+  const auto episodes = grid.all_episodes();
+  ASSERT_EQ(static_cast<int>(episodes.size()), grid.size());
+  EXPECT_EQ(episodes[8].town, "carla_town02");
+  EXPECT_EQ(episodes[8].route, "straight_1");
+  EXPECT_EQ(episodes.back().route, "two_turn_2");
+  grid.town_routes["carla_town02"] = {"left_1", "left_1"};
+  EXPECT_THROW(grid.validate(), std::invalid_argument);
+}
+
+TEST(EvalProtocol, NamesParseBackAndAnUnknownOneSaysWhatExists) {
+  for (const EvalProtocol p : {EvalProtocol::kStrict, EvalProtocol::kIndriveCode}) {
+    EXPECT_EQ(parse_protocol(protocol_name(p)), p);
+  }
+  try {
+    parse_protocol("carla");
+    FAIL() << "an unknown protocol was taken";
+  } catch (const EvalError& error) {
+    EXPECT_NE(std::string(error.what()).find("strict (ours) or indrive_code"), std::string::npos)
+        << error.what();
+  }
+}
+
 }  // namespace
 // A map given by path names result files by its stem: the local trainer's evaluation once
 // tried to write eval/local-maps/x.xodr-straight.csv for env.town=maps/x.xodr.

@@ -158,5 +158,52 @@ TEST(PaperGridChain, TrainedInLinksTheOtherGridsFinishedRunsInsteadOfTraining) {
   EXPECT_FALSE(fs::exists(out / "s0/pretrain-icm"));
 }
 
+// --towns carla: every evaluation runs on the CARLA towns, once per protocol, and the training
+// runs start on carla_town01. Stand-in programs record how they were called.
+TEST(PaperGridChain, CarlaTownsEvaluateUnderBothProtocols) {
+  testing::TempDir dir;
+  const fs::path bin = dir.path() / "bin", out = dir.path() / "grid";
+  for (const std::string program : {"indrive", "indrive-actor", "indrive-train-local"}) {
+    write_text(bin / program,
+               "#!/bin/sh\necho \"$*\" >> \"" + (dir.path() / "calls").string() + "\"\n");
+    fs::permissions(bin / program, fs::perms::owner_all);
+  }
+  write_text(out / "s0/pretrain-disag/DONE", "");
+  write_text(out / "s0/pretrain-disag/snapshot.params", "weights");
+  const fs::path log = dir.path() / "chain.log";
+  testing::Child run({"/bin/bash", (kSource / "deploy/experiments/paper_grid.sh").string(), "chain",
+                      "--out", out.string(), "--towns", "carla", "--code-budget", "5000", "--seed",
+                      "0", "--method", "disag", "--stages", "zeroshot", "--bin", bin.string()},
+                     log);
+  ASSERT_EQ(run.wait(60s), 0) << testing::slurp(log);
+  const std::string calls = testing::slurp(dir.path() / "calls");
+  // Two evaluators per protocol, each on both CARLA towns.
+  std::size_t evaluators = 0, code = 0;
+  for (std::size_t at = calls.find("--evaluate"); at != std::string::npos;
+       at = calls.find("--evaluate", at + 1)) {
+    const std::string line = calls.substr(at, calls.find('\n', at) - at);
+    ++evaluators;
+    EXPECT_NE(line.find("eval.towns=carla_town01,carla_town02"), std::string::npos) << line;
+    if (line.find("eval.protocol=indrive_code") != std::string::npos) {
+      ++code;
+      EXPECT_NE(line.find("zeroshot-disag-code"), std::string::npos) << line;
+      EXPECT_NE(line.find("eval.indrive_code_budget_steps=5000"), std::string::npos) << line;
+    } else {
+      EXPECT_NE(line.find("eval.protocol=strict"), std::string::npos) << line;
+    }
+  }
+  EXPECT_EQ(evaluators, 4u) << calls;
+  EXPECT_EQ(code, 2u) << calls;
+  EXPECT_TRUE(fs::exists(out / "s0/zeroshot-disag/DONE"));
+  EXPECT_TRUE(fs::exists(out / "s0/zeroshot-disag-code/DONE"));
+
+  const fs::path bad_log = dir.path() / "bad.log";
+  testing::Child bad({"/bin/bash", (kSource / "deploy/experiments/paper_grid.sh").string(), "chain",
+                      "--towns", "carla02", "--bin", bin.string()},
+                     bad_log);
+  EXPECT_EQ(bad.wait(60s), 2);
+  EXPECT_NE(testing::slurp(bad_log).find("--towns must be ours"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace indrive

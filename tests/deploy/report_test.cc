@@ -13,7 +13,8 @@ namespace {
 // n episodes of one cell, the first `successes` of them successful.
 void add_episodes(std::vector<EpisodeRecord>& out, const std::string& method, int seed,
                   const std::string& town, const std::string& route, int density, int n,
-                  int successes, const std::string& failure = "collision") {
+                  int successes, const std::string& failure = "collision",
+                  const std::string& protocol = "strict") {
   for (int i = 0; i < n; ++i) {
     out.push_back({.run_id = method + "-s" + std::to_string(seed),
                    .method = method,
@@ -25,7 +26,8 @@ void add_episodes(std::vector<EpisodeRecord>& out, const std::string& method, in
                    .density = density,
                    .episode = i,
                    .success = i < successes,
-                   .failure_reason = i < successes ? "" : failure});
+                   .failure_reason = i < successes ? "" : failure,
+                   .protocol = protocol});
   }
 }
 
@@ -38,7 +40,7 @@ TEST(Report, AveragesUniformlyOverDensitiesThenSeeds) {
   add_episodes(records, "disag", 1, "town01", "straight", 5, 2, 1);
   add_episodes(records, "disag", 1, "town01", "straight", 20, 2, 0);
   const Report report = aggregate(records);
-  const Table& table = report.tables.at({"zero_shot", "exploration"});
+  const Table& table = report.tables.at({"strict", "zero_shot", "exploration"});
   const CellStats& cell = table.cells.at("disag").at("town01").at("straight");
   EXPECT_EQ(cell.episodes, 10);
   EXPECT_EQ(cell.successes, 6);
@@ -79,7 +81,7 @@ TEST(Report, AveragesAndGapsCarryATIntervalOverSeeds) {
   add_episodes(records, "icm", 0, "town02", "straight", 10, 4, 0);
   add_episodes(records, "icm", 0, "town02", "two_turn", 10, 4, 0);
   const Report report = aggregate(records);
-  const Table& table = report.tables.at({"zero_shot", "exploration"});
+  const Table& table = report.tables.at({"strict", "zero_shot", "exploration"});
   // town01 averages per seed 75, 62.5, 50: mean 62.5, sd 12.5, half 4.303 * 12.5 / sqrt(3).
   const auto town01 = average_over_routes_by_seed(table, "disag", "town01");
   ASSERT_TRUE(town01.has_value());
@@ -111,9 +113,9 @@ TEST(Report, AveragesAndGapsCarryATIntervalOverSeeds) {
   add_episodes(records, "rnd", 0, "town01", "straight", 10, 4, 1);
   add_episodes(records, "rnd", 1, "town01", "two_turn", 10, 4, 1);
   const Report mixed = aggregate(records);
-  EXPECT_FALSE(
-      average_over_routes_by_seed(mixed.tables.at({"zero_shot", "exploration"}), "rnd", "town01")
-          .has_value());
+  EXPECT_FALSE(average_over_routes_by_seed(mixed.tables.at({"strict", "zero_shot", "exploration"}),
+                                           "rnd", "town01")
+                   .has_value());
 }
 
 TEST(Report, RoutesInPaperOrderAveragesAndTheGeneralisationGap) {
@@ -123,7 +125,7 @@ TEST(Report, RoutesInPaperOrderAveragesAndTheGeneralisationGap) {
   add_episodes(records, "icm", 0, "town02", "straight", 10, 4, 2);              // 50 %
   add_episodes(records, "icm", 0, "town02", "two_turn", 10, 4, 0, "off_road");  // 0 %
   const Report report = aggregate(records);
-  const Table& table = report.tables.at({"zero_shot", "exploration"});
+  const Table& table = report.tables.at({"strict", "zero_shot", "exploration"});
   EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "two_turn"}));
   EXPECT_DOUBLE_EQ(average_over_routes(table, "icm", "town01"), 50.0);
   EXPECT_DOUBLE_EQ(average_over_routes(table, "icm", "town02"), 25.0);
@@ -300,6 +302,68 @@ TEST(Report, LearningCurveFilesAreLeftOutOfTheTables) {
   // Only a curve file: nothing to report, and the error says so.
   std::filesystem::remove(dir.path() / "eval" / "evaluator-0.csv");
   EXPECT_THROW(load_results({dir.path()}), CsvError);
+}
+
+// A row's protocol reaches the report: the two protocols' results never share a table, each
+// table names its protocol, the CSV carries it, the layout bound stands under strict tables
+// only, and zero-shot tables of the CARLA towns show the paper's averages beside ours.
+TEST(Report, EachProtocolGetsItsOwnTablesWithThePapersFiguresBeside) {
+  std::vector<EpisodeRecord> records;
+  add_episodes(records, "disag", 0, "carla_town01", "straight_1", 10, 4, 3, "out_of_lane",
+               "indrive_code");
+  add_episodes(records, "disag", 0, "carla_town02", "straight_1", 10, 4, 1, "out_of_lane",
+               "indrive_code");
+  add_episodes(records, "disag", 0, "carla_town01", "straight_1", 10, 4, 2, "off_route");
+  add_episodes(records, "disag", 0, "carla_town02", "straight_1", 10, 4, 0, "off_route");
+  const Report report = aggregate(records);
+  ASSERT_EQ(report.tables.size(), 2u);
+  EXPECT_DOUBLE_EQ(report.tables.at({"indrive_code", "zero_shot", "exploration"})
+                       .cells.at("disag")
+                       .at("carla_town01")
+                       .at("straight_1")
+                       .sr,
+                   75.0);
+  EXPECT_DOUBLE_EQ(report.tables.at({"strict", "zero_shot", "exploration"})
+                       .cells.at("disag")
+                       .at("carla_town01")
+                       .at("straight_1")
+                       .sr,
+                   50.0);
+  TownChoices choices;
+  choices["carla_town01"] = {{"straight_1", "a", "rs", 's'}};
+  choices["carla_town02"] = {{"straight_1", "b", "rs", 's'}};
+  const std::string md = render_markdown(report, "town01", "town02", choices);
+  EXPECT_NE(md.find("(protocol indrive_code: the public InDRiVE code's rules)"), std::string::npos)
+      << md;
+  EXPECT_NE(md.find("(protocol strict)"), std::string::npos) << md;
+  // The gap falls back to the CARLA namesakes of town01 and town02; the paper's row beside.
+  EXPECT_NE(md.find("gap (carla_town01 - carla_town02)"), std::string::npos) << md;
+  EXPECT_NE(md.find("| disag | 75.0 | 25.0 | 50.0 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| *paper, disag* | 75.65 | 73.20 | 2.45 |"), std::string::npos) << md;
+  // One layout bound row: the strict table's.
+  const auto first = md.find("*layout bound* |");
+  ASSERT_NE(first, std::string::npos) << md;
+  EXPECT_EQ(md.find("*layout bound* |", first + 1), std::string::npos) << md;
+  EXPECT_GT(first, md.find("(protocol strict)")) << md;
+  const std::string csv = render_csv(report);
+  EXPECT_NE(csv.find("protocol,eval_kind,task,method,town,route"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("indrive_code,zero_shot,exploration,disag,carla_town01,straight_1,"),
+            std::string::npos)
+      << csv;
+  EXPECT_EQ(paper_zero_shot_average("icm", "carla_town02"), 48.61);
+  EXPECT_FALSE(paper_zero_shot_average("icm", "town02").has_value());
+  EXPECT_FALSE(paper_zero_shot_average("random", "carla_town01").has_value());
+}
+
+TEST(Report, TheCarlaTownsRoutesSortByKind) {
+  std::vector<EpisodeRecord> records;
+  for (const std::string route : {"two_turn_1", "left_1", "straight_2", "right_1", "straight_1"}) {
+    add_episodes(records, "disag", 0, "carla_town01", route, 10, 1, 1, "", "indrive_code");
+  }
+  const Report report = aggregate(records);
+  EXPECT_EQ(
+      report.tables.begin()->second.routes,
+      (std::vector<std::string>{"straight_1", "straight_2", "right_1", "left_1", "two_turn_1"}));
 }
 
 }  // namespace

@@ -43,6 +43,9 @@ TEST(EventNames, JoinSetBits) {
   EXPECT_TRUE(is_failure(kTimeLimit));
   EXPECT_TRUE(is_terminal(kTimeLimit | kCollision));
   EXPECT_EQ(event_names(kOffRoad | kOffRoute), "off_road+off_route");
+  EXPECT_EQ(event_names(kOutOfLane | kTooSlow), "out_of_lane+too_slow");
+  EXPECT_TRUE(is_failure(kOutOfLane) && is_terminal(kOutOfLane));
+  EXPECT_TRUE(is_failure(kTooSlow) && is_terminal(kTooSlow));
   EXPECT_TRUE(is_failure(kOffRoute));
   EXPECT_TRUE(is_terminal(kOffRoute));
   // Every bit below kNumEvents has a name.
@@ -216,6 +219,91 @@ TEST_F(OffRouteTest, FartherThanALaneWidthPlusMarginFromTheRouteFires) {
   };
   EXPECT_EQ(at_distance(3.5 + 0.9), 0u);  // lane width 3.5 m + margin 1 m
   EXPECT_EQ(at_distance(3.5 + 1.1), kOffRoute);
+}
+
+// The public InDRiVE code's rules (EventRules::kIndriveCode) on the same network.
+class IndriveCodeRulesTest : public EventDetectorTest {
+ protected:
+  void SetUp() override {
+    EventDetectorTest::SetUp();
+    EventConfig config;
+    config.rules = EventRules::kIndriveCode;
+    config.time_limit_steps = 30000;
+    detector_ = std::make_unique<EventDetector>(*net_, config, EgoParams{});
+    route_ = std::make_unique<Route>(*net_, RouteSpec{.name = "east",
+                                                      .start = Eigen::Vector2d(20.0, -1.75),
+                                                      .end = Eigen::Vector2d(120.0, -1.75)});
+    detector_->reset(route_.get());
+  }
+  std::unique_ptr<Route> route_;
+};
+
+TEST_F(IndriveCodeRulesTest, OutOfLaneBeyondFortyFivePercentOfTheNearestLanesWidth) {
+  // Lane width 3.5 m: out of lane beyond 1.575 m from the nearest lane's centre line.
+  EXPECT_EQ(check({60.0, -1.75 + 1.5, 0.0}), 0u);
+  EXPECT_EQ(check({60.0, -1.75 - 1.65, 0.0}), kOutOfLane);
+  // Half way between the two lanes of the road (on the centre line) the nearest lane is 1.75 m
+  // away: out of lane, though both lanes are under the car.
+  EXPECT_EQ(check({60.0, 0.0, 0.0}), kOutOfLane);
+  // Centred in the other direction's lane: in a lane, and wrong-way driving ends nothing yet.
+  EXPECT_EQ(check({60.0, 1.75, 0.0}), 0u);
+  // Far off: off road and out of lane.
+  EXPECT_EQ(check({60.0, -12.0, 0.0}), kOutOfLane | kOffRoad);
+}
+
+TEST_F(IndriveCodeRulesTest, LaneInvasionsAreCountedNotTerminal) {
+  // Over the marking by 0.35 m (the strict rule's invasion) but within 45% of the lane width.
+  for (int i = 1; i <= 3; ++i) {
+    EXPECT_EQ(check({60.0, -1.75 + 1.05, 0.0}, 5.0, {}, 2 * i - 1), 0u);
+    EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, {}, 2 * i), 0u);
+  }
+  EXPECT_EQ(detector_->lane_invasions(), 3);
+  detector_->reset(route_.get());
+  EXPECT_EQ(detector_->lane_invasions(), 0);
+}
+
+TEST_F(IndriveCodeRulesTest,
+       WrongDirectionAfterTwoThousandStepsAgainstTheLaneAboveHalfAMetrePerSecond) {
+  const Pose2 against{60.0, 1.75, 0.0};  // westbound lane, facing east
+  for (int i = 1; i < 2000; ++i) ASSERT_EQ(check(against, 1.0, {}, i), 0u) << i;
+  EXPECT_EQ(check(against, 1.0, {}, 2000), kWrongDirection);
+  // Slower than 0.5 m/s does not count, and breaks the run.
+  detector_->reset(route_.get());
+  for (int i = 1; i < 1500; ++i) check(against, 1.0, {}, i);
+  check(against, 0.4, {}, 1500);
+  for (int i = 1501; i < 3000; ++i) ASSERT_EQ(check(against, 1.0, {}, i), 0u) << i;
+  // 110 deg off the lane is not wrong direction (the code's 120 deg).
+  detector_->reset(route_.get());
+  for (int i = 1; i <= 2500; ++i) {
+    ASSERT_EQ(check({60.0, -1.75, kPi * 110.0 / 180.0}, 1.0, {}, i), 0u) << i;
+  }
+}
+
+TEST_F(IndriveCodeRulesTest, TooSlowForTwoThousandStepsAfterTheFirstTwoThousand) {
+  const Pose2 still{60.0, -1.75, 0.0};
+  // Standing for the first 2,000 steps is the grace; 2,000 more end the episode.
+  for (int i = 1; i < 4000; ++i) ASSERT_EQ(check(still, 0.0, {}, i), 0u) << i;
+  EXPECT_EQ(check(still, 0.0, {}, 4000), kTooSlow);
+  // The strict stall (60 s) never applies.
+  detector_->reset(route_.get());
+  for (int i = 2001; i < 3000; ++i) ASSERT_EQ(check(still, 0.005, {}, i), 0u) << i;
+  check(still, 0.02, {}, 3000);
+  for (int i = 3001; i < 5000; ++i) ASSERT_EQ(check(still, 0.0, {}, i), 0u) << i;
+  EXPECT_EQ(check(still, 0.0, {}, 5000), kTooSlow);
+}
+
+TEST_F(IndriveCodeRulesTest, SuccessWithinTwoMetresOfTheEndPointByAnyPath) {
+  EXPECT_EQ(check({117.9, -1.75, 0.0}), 0u);
+  EXPECT_EQ(check({118.1, -1.75, 0.0}), kDestination);
+  // The tracker's report counts for nothing here; the distance does.
+  EXPECT_EQ(detector_->update({.ego = {.pose = {60.0, -1.75, 0.0}, .speed_mps = 5.0},
+                               .route_finished = true,
+                               .step = 10}),
+            0u);
+  // Neither leaving the route nor the strict lane rules end an episode.
+  EXPECT_EQ(check({151.75, 30.0, kPi / 2}), 0u);
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, {}, 29999), 0u);
+  EXPECT_EQ(check({60.0, -1.75, 0.0}, 5.0, {}, 30000), kTimeLimit);
 }
 
 }  // namespace

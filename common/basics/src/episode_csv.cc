@@ -8,7 +8,8 @@
 namespace indrive {
 namespace {
 
-constexpr int kColumns = 17;
+constexpr int kColumnsV1 = 17;
+constexpr int kColumns = 19;
 
 // Quotes a field if it holds a comma or a quote (RFC 4180). A line break is refused: the files
 // are read line by line, and a writer reopening one counts and cuts rows at line ends.
@@ -61,10 +62,15 @@ T parse_number(const std::string& text, const std::string& where) {
 
 }  // namespace
 
-const std::string& episode_csv_header() {
+const std::string& episode_csv_header_v1() {
   static const std::string header =
       "run_id,method,eval_kind,task,train_seed,policy_version,town,route,density,traffic_seed,"
       "spawn_seed,episode,success,failure_reason,steps,route_completion,return";
+  return header;
+}
+
+const std::string& episode_csv_header() {
+  static const std::string header = episode_csv_header_v1() + ",protocol,lane_invasions";
   return header;
 }
 
@@ -81,6 +87,8 @@ EpisodeCsvWriter::EpisodeCsvWriter(const std::filesystem::path& path) : path_(pa
       std::filesystem::resize_file(path, complete, error);
       if (error) throw CsvError("cannot cut the partial last row of " + path.string());
     }
+    // A file of an older build (a resumed run's): its rows stay in its columns.
+    v1_ = text.compare(0, episode_csv_header_v1().size() + 1, episode_csv_header_v1() + "\n") == 0;
     const auto lines = std::count(text.begin(), text.begin() + static_cast<long>(complete), '\n');
     rows_ = std::max<long long>(0, lines - 1);  // less the header
     fresh = complete == 0;
@@ -91,6 +99,11 @@ EpisodeCsvWriter::EpisodeCsvWriter(const std::filesystem::path& path) : path_(pa
 }
 
 void EpisodeCsvWriter::write(const EpisodeRecord& r) {
+  if (v1_ && r.protocol != "strict") {
+    throw CsvError(path_.string() + " was written before results had a protocol column, and a " +
+                   r.protocol + " row cannot be told apart there; move it aside (it stays " +
+                   "readable by indrive report) and evaluate into a new file");
+  }
   std::ostringstream row;
   row.precision(6);
   row << quote(r.run_id) << ',' << quote(r.method) << ',' << quote(r.eval_kind) << ','
@@ -98,6 +111,7 @@ void EpisodeCsvWriter::write(const EpisodeRecord& r) {
       << ',' << quote(r.route) << ',' << r.density << ',' << r.traffic_seed << ',' << r.spawn_seed
       << ',' << r.episode << ',' << (r.success ? 1 : 0) << ',' << quote(r.failure_reason) << ','
       << r.steps << ',' << r.route_completion << ',' << r.episode_return;
+  if (!v1_) row << ',' << quote(r.protocol) << ',' << r.lane_invasions;
   out_ << row.str() << '\n' << std::flush;
   if (!out_) throw CsvError("cannot append to " + path_.string() + " (disk full?)");
   ++rows_;
@@ -109,18 +123,20 @@ std::vector<EpisodeRecord> read_episode_csv(const std::filesystem::path& path) {
   std::string line;
   if (!std::getline(in, line)) throw CsvError(path.string() + " is empty (no header line)");
   if (!line.empty() && line.back() == '\r') line.pop_back();
-  if (line != episode_csv_header()) {
+  const bool v1 = line == episode_csv_header_v1();
+  if (line != episode_csv_header() && !v1) {
     throw CsvError(path.string() + ": the header is not an episode results header; expected '" +
                    episode_csv_header() + "'");
   }
+  const int columns = v1 ? kColumnsV1 : kColumns;
   std::vector<EpisodeRecord> records;
   for (int number = 2; std::getline(in, line); ++number) {
     if (line.empty() || line == "\r") continue;
     const std::string where = path.string() + ":" + std::to_string(number);
     const auto f = split_row(line);
-    if (static_cast<int>(f.size()) != kColumns) {
+    if (static_cast<int>(f.size()) != columns) {
       throw CsvError(where + ": " + std::to_string(f.size()) + " fields, expected " +
-                     std::to_string(kColumns) + " (a partially written row?)");
+                     std::to_string(columns) + " (a partially written row?)");
     }
     EpisodeRecord r;
     r.run_id = f[0];
@@ -142,6 +158,17 @@ std::vector<EpisodeRecord> read_episode_csv(const std::filesystem::path& path) {
     r.steps = parse_number<int>(f[14], where + " steps");
     r.route_completion = parse_number<double>(f[15], where + " route_completion");
     r.episode_return = parse_number<double>(f[16], where + " return");
+    if (v1) {
+      r.protocol = "strict";
+      r.lane_invasions = r.failure_reason.find("lane_invasion") != std::string::npos ? 1 : 0;
+    } else {
+      r.protocol = f[17];
+      if (r.protocol != "strict" && r.protocol != "indrive_code") {
+        throw CsvError(where + ": protocol '" + r.protocol +
+                       "' is neither strict nor indrive_code");
+      }
+      r.lane_invasions = parse_number<int>(f[18], where + " lane_invasions");
+    }
     records.push_back(std::move(r));
   }
   return records;

@@ -158,8 +158,17 @@ void declare_service_schema(config::Schema& schema) {
                  "(0: none; `indrive launch` sets 0 and writes the page itself)",
                  0.0);
   schema.add_string("eval.towns", "town01,town02", "towns of the evaluation grid, comma-separated")
-      .add_string("eval.routes", "straight,right_loop,left_loop,two_turn",
-                  "routes of the evaluation grid, comma-separated")
+      .add_string("eval.routes", "all",
+                  "routes of the evaluation grid, comma-separated, or all: every town's own "
+                  "routes (our towns: straight, right_loop, left_loop, two_turn; the CARLA "
+                  "towns: the public InDRiVE code's)")
+      .add_choice("eval.protocol", "strict", {"strict", "indrive_code"},
+                  "rules that judge an episode: strict (ours: the route's budget, every road "
+                  "rule and leaving the route end it) or indrive_code (the public InDRiVE "
+                  "code's: 2 m of the end point by any path, a fixed budget; "
+                  "docs/architecture.md section 9)")
+      .add_int("eval.indrive_code_budget_steps", 30000,
+               "indrive_code: steps before an episode ends unfinished (the code's 30,000)", 1)
       .add_number_list("eval.densities", {5, 10, 20}, "densities of the evaluation grid", 0, 20)
       .add_int("eval.episodes_per_cell", 50, "episodes per town x route x density", 1)
       .add_bool("eval.wait_for_done", true,

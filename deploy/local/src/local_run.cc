@@ -422,7 +422,9 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
   grid.validate();
 
   // As in the evaluator, episodes end at the route's own step budget (below).
-  env::Env env(actor::protocol_env_config(actor::env_config(config)));
+  env::Env env(actor::protocol_env_config(
+      actor::env_config(config),
+      actor::parse_protocol(config.config().get<std::string>("eval.protocol"))));
   EpisodeCsvWriter csv(run.eval() /
                        ("local-" + actor::town_file_label(town) + "-" + route + ".csv"));
   EvaluationSummary summary;

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <string>
 
 #include "testing.h"
@@ -101,13 +102,57 @@ TEST(EpisodeCsv, APartialRowOrWrongHeaderIsAClearError) {
     read_episode_csv(path);
     FAIL();
   } catch (const CsvError& error) {
-    EXPECT_NE(std::string(error.what()).find("eval.csv:3: 3 fields, expected 17"),
+    EXPECT_NE(std::string(error.what()).find("eval.csv:3: 3 fields, expected 19"),
               std::string::npos)
         << error.what();
   }
   const auto other = dir.path() / "other.csv";
   { std::ofstream(other) << "a,b,c\n1,2,3\n"; }
   EXPECT_THROW(read_episode_csv(other), CsvError);
+}
+
+TEST(EpisodeCsv, ProtocolAndLaneInvasionsRoundTrip) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "eval.csv";
+  EpisodeRecord code = sample(0, true);
+  code.protocol = "indrive_code";
+  code.lane_invasions = 7;
+  { EpisodeCsvWriter(path).write(code); }
+  const auto records = read_episode_csv(path);
+  ASSERT_EQ(records.size(), 1u);
+  EXPECT_EQ(records[0].protocol, "indrive_code");
+  EXPECT_EQ(records[0].lane_invasions, 7);
+  // An unknown protocol is refused.
+  {
+    std::ofstream(path, std::ios::app) << "r,m,zero_shot,t,0,1,town01,straight,5,1,1,0,1,,10,1,0,"
+                                          "loose,0\n";
+  }
+  EXPECT_THROW(read_episode_csv(path), CsvError);
+}
+
+// Files of older builds (no protocol column) stay readable as strict evaluations, and a
+// resumed run appends strict rows in their columns; a row of another protocol is refused.
+TEST(EpisodeCsv, FilesWithoutTheProtocolColumnReadAsStrict) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "old.csv";
+  {
+    std::ofstream(path) << episode_csv_header_v1() << "\n"
+                        << "r,disag,zero_shot,exploration,0,3,town01,straight,5,101,11,0,0,"
+                           "lane_invasion,40,0.1,0\n";
+  }
+  {
+    EpisodeCsvWriter writer(path);
+    writer.write(sample(1, true));
+    EpisodeRecord code = sample(2, true);
+    code.protocol = "indrive_code";
+    EXPECT_THROW(writer.write(code), CsvError);
+  }
+  const auto records = read_episode_csv(path);
+  ASSERT_EQ(records.size(), 2u);
+  EXPECT_EQ(records[0].protocol, "strict");
+  EXPECT_EQ(records[0].lane_invasions, 1);  // lane_invasion ended it
+  EXPECT_EQ(records[1].protocol, "strict");
+  EXPECT_EQ(records[1].lane_invasions, 0);
 }
 
 }  // namespace

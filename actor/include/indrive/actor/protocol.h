@@ -15,6 +15,7 @@
 
 #include <array>
 #include <cstdint>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -27,6 +28,19 @@ class EvalError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+// Which rules judge an evaluation episode (eval.protocol; docs/architecture.md section 9):
+//   strict        ours: the route's own step budget, every road rule ends the episode, leaving
+//                 the route (off_route) too; success within 10 m of the route's end
+//   indrive_code  the public InDRiVE code's: a fixed step budget (eval.indrive_code_budget_steps,
+//                 the code's 30,000), success within 2.0 m of the end point by any path, and
+//                 only collision, out of lane, off road, wrong direction and too slow end an
+//                 episode (envserver/events.h); lane invasions are counted, not terminal
+enum class EvalProtocol { kStrict, kIndriveCode };
+// "strict" or "indrive_code".
+const char* protocol_name(EvalProtocol protocol);
+// Parses a protocol name; throws EvalError naming the allowed values.
+EvalProtocol parse_protocol(const std::string& name);
 
 // The fixed seed sets of the protocol (any fixed values serve; these are ours).
 inline constexpr std::array<int, 3> kTrafficSeeds = {101, 202, 303};
@@ -47,6 +61,11 @@ struct EpisodeSpec {
 struct ProtocolGrid {
   std::vector<std::string> towns = {"town01", "town02"};
   std::vector<std::string> routes = {"straight", "right_loop", "left_loop", "two_turn"};
+  // A town's own routes where they differ from `routes` (eval.routes: all names each town's
+  // routes; the CARLA towns have the public code's, not our four).
+  std::map<std::string, std::vector<std::string>> town_routes;
+  // The routes evaluated on `town`.
+  const std::vector<std::string>& routes_of(const std::string& town) const;
   std::vector<int> densities = {5, 10, 20};
   int episodes_per_cell = 50;
 

@@ -23,8 +23,10 @@ namespace indrive::actor {
 
 // The eval.* keys of an episode.
 struct ProtocolEpisodeOptions {
-  double budget_speed_mps = 3.0;    // eval.budget_speed_mps
-  double budget_slack = 1.5;        // eval.budget_slack
+  EvalProtocol protocol = EvalProtocol::kStrict;  // eval.protocol
+  double budget_speed_mps = 3.0;                  // eval.budget_speed_mps (strict)
+  double budget_slack = 1.5;                      // eval.budget_slack (strict)
+  int code_budget_steps = 30000;                  // eval.indrive_code_budget_steps (indrive_code)
   int video_episodes = 0;           // eval.video_episodes: record episodes 0..N-1 of every cell
   std::filesystem::path video_dir;  // where the videos go (<run>/videos)
 };
@@ -39,14 +41,18 @@ struct EpisodeOutcome {
   int steps = 0;
   double route_completion = 0.0;
   double episode_return = 0.0;
+  int lane_invasions = 0;  // entries into the lane-invasion condition (events.h)
+  EvalProtocol protocol = EvalProtocol::kStrict;
 };
 
-// Runs episode `spec` in `env` (built with protocol_env_config) with `policy`.
+// Runs episode `spec` in `env` (built with protocol_env_config for options.protocol) with
+// `policy`: up to the route's step budget (strict) or options.code_budget_steps (indrive_code).
 EpisodeOutcome run_protocol_episode(env::Env& env, EpisodePolicy& policy, const EpisodeSpec& spec,
                                     const ProtocolEpisodeOptions& options,
                                     const std::atomic<bool>& stop);
 
-// The verdict of a finished episode as a CSV row without the run-level fields.
+// The verdict of a finished episode as a CSV row without the run-level fields, its protocol and
+// lane invasions included.
 EpisodeRecord protocol_record(const EpisodeSpec& spec, const EpisodeOutcome& outcome);
 
 }  // namespace indrive::actor

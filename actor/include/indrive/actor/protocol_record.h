@@ -14,8 +14,13 @@
 namespace indrive::actor {
 
 // Throws EvalError unless every town is a built-in name, an existing map file or grid:<seed>,
-// and every route is one of the four route names; the message lists the allowed values.
+// and every route is one of the town's routes (env::town_route_names); the message lists the
+// allowed values.
 void check_grid_names(const ProtocolGrid& grid);
+// The grid's routes from eval.routes: "all" gives each town its own routes
+// (ProtocolGrid::town_routes), a list names the same routes on every town.
+void set_grid_routes(ProtocolGrid& grid, const std::string& routes,
+                     const env::TownOptions& options = {});
 
 // Step budget of a route: ceil(slack * length_m / (speed_mps * dt_s)). With the defaults
 // (3 m/s, the slower task speed, and 1.5x slack at 10 Hz) that is 5 steps per metre: 3,245 steps
@@ -27,9 +32,11 @@ int route_step_budget(double length_m, double speed_mps = 3.0, double slack = 1.
 // length, set back from its last junction on a point-to-point route), and 1 when the
 // destination event fired (within kDestinationRadiusM of the terminal waypoint, or a lap).
 double route_completion(double progress_m, double length_m, std::uint32_t events);
-// The env config for protocol episodes: the route's step budget ends them, so the training
-// time limit (env.time_limit_steps) is lifted out of its way.
-env::EnvConfig protocol_env_config(env::EnvConfig config);
+// The env config for protocol episodes: the protocol's step budget ends them, so the training
+// time limit (env.time_limit_steps) is lifted out of its way; the events follow the protocol's
+// rules.
+env::EnvConfig protocol_env_config(env::EnvConfig config,
+                                   EvalProtocol protocol = EvalProtocol::kStrict);
 
 // The protocol's verdict on one episode of `spec`, as a CSV row without the run-level fields
 // (run id, method, eval kind, task, seeds of training, policy version): success means the

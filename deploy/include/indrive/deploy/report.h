@@ -39,8 +39,10 @@ struct CellStats {
   double fr() const { return 100.0 - sr; }
 };
 
-// Which table a result belongs to: (eval_kind, task), e.g. ("zero_shot", "exploration").
+// Which table a result belongs to: (protocol, eval_kind, task), e.g. ("strict", "zero_shot",
+// "exploration"). Results judged by different rules never share a table.
 struct TableKey {
+  std::string protocol;  // strict | indrive_code (EpisodeRecord::protocol)
   std::string eval_kind;
   std::string task;
   auto operator<=>(const TableKey&) const = default;
@@ -49,7 +51,9 @@ struct TableKey {
 struct Table {
   std::vector<std::string> methods;  // rows, in first-seen order
   std::vector<std::string> towns;    // in first-seen order
-  std::vector<std::string> routes;   // paper order first, then others alphabetically
+  // Our towns' four in the paper's order, then others by kind (straight, right, left, two
+  // turns: the CARLA towns' straight_1, ...) and name.
+  std::vector<std::string> routes;
   // [method][town][route] -> stats; missing when never evaluated.
   std::map<std::string, std::map<std::string, std::map<std::string, CellStats>>> cells;
   // [method][town][route][failure reason] -> episodes ending with it.
@@ -100,9 +104,15 @@ using TownChoices = std::map<std::string, std::vector<env::RouteChoice>>;
 // Throws std::invalid_argument for an unknown route set.
 TownChoices route_choices_of(const Report& report, const std::string& route_set = "right");
 
+// The paper's zero-shot average SR over routes (%, its Tables III-VI read as averages) for a
+// method (disag, icm, rnd) in a town (carla_town01 = its Town01, carla_town02 = its Town02);
+// nullopt where the paper gives none or the town is not one of its towns.
+std::optional<double> paper_zero_shot_average(const std::string& method, const std::string& town);
+
 // Renders the tables. `seen_town`/`heldout_town` name the generalisation-gap columns; towns
-// in `choices` get a layout-bound row under the averages, whose note names `route_set` (the
-// set the choices were taken from).
+// in `choices` get a layout-bound row under the averages of strict tables, whose note names
+// `route_set` (the set the choices were taken from); zero-shot tables show the paper's averages
+// beside ours in the CARLA towns' columns.
 std::string render_markdown(const Report& report, const std::string& seen_town,
                             const std::string& heldout_town, const TownChoices& choices = {},
                             const std::string& route_set = "right");

@@ -21,6 +21,22 @@
 //   time_limit       the episode reached its step limit (EventConfig::time_limit_steps; the
 //                    evaluator sets a per-route budget instead, 5 steps per metre of route)
 //
+// Those are the strict rules (EventRules::kStrict), ours everywhere. Evaluation can instead
+// judge by the public InDRiVE code's rules (EventRules::kIndriveCode, eval.protocol:
+// indrive_code; docs/architecture.md section 9), where an episode ends only on
+//   collision        as above
+//   out_of_lane      the ego's centre lies farther than 0.45 x the lane's width from the centre
+//                    line of the nearest lane (normal or internal), or on no lane at all
+//   off_road         the ego's centre is on no lane and in no junction (as above)
+//   wrong_direction  faster than 0.5 m/s with the heading more than 120 deg from the nearest
+//                    lane's, for 2,000 steps in a row
+//   too_slow         slower than 0.01 m/s for 2,000 steps in a row after the first 2,000
+//   destination      the ego's centre within 2.0 m of the route's end point
+//                    (Route::destination()), by any path
+//   time_limit       the evaluator's budget
+// Lane invasions (the strict rule's condition) are counted, each entry once
+// (EventDetector::lane_invasions()), and end nothing; neither stall nor off_route applies.
+//
 //   EventDetector events(net, EventConfig{}, ego_params);
 //   events.reset();
 //   std::uint32_t bits = events.update({.ego = ego, .others = boxes, .step = t});
@@ -48,12 +64,16 @@ enum EventBit : std::uint32_t {
   kDestination = 1u << 5,
   kTimeLimit = 1u << 6,
   kOffRoute = 1u << 7,
+  kOutOfLane = 1u << 8,  // the public InDRiVE code's rules only
+  kTooSlow = 1u << 9,    // the public InDRiVE code's rules only
 };
-inline constexpr int kNumEvents = 8;
-inline constexpr std::uint32_t kFailureEvents =
-    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kTimeLimit | kOffRoute;
-inline constexpr std::uint32_t kTerminalEvents =
-    kCollision | kLaneInvasion | kWrongDirection | kOffRoad | kStall | kDestination | kOffRoute;
+inline constexpr int kNumEvents = 10;
+inline constexpr std::uint32_t kFailureEvents = kCollision | kLaneInvasion | kWrongDirection |
+                                                kOffRoad | kStall | kTimeLimit | kOffRoute |
+                                                kOutOfLane | kTooSlow;
+inline constexpr std::uint32_t kTerminalEvents = kCollision | kLaneInvasion | kWrongDirection |
+                                                 kOffRoad | kStall | kDestination | kOffRoute |
+                                                 kOutOfLane | kTooSlow;
 
 // Returns the name of one event bit ("collision", ...), or "unknown".
 const char* event_name(EventBit bit);
@@ -66,8 +86,25 @@ inline bool is_terminal(std::uint32_t bits) { return (bits & kTerminalEvents) !=
 // True when any failure event fired.
 inline bool is_failure(std::uint32_t bits) { return (bits & kFailureEvents) != 0; }
 
+// Which rules end an episode (see the top of this file).
+enum class EventRules { kStrict, kIndriveCode };
+
+// The public InDRiVE code's thresholds (its evaluation blocks and the code's defaults).
+struct IndriveCodeRules {
+  double destination_m = 2.0;
+  double out_of_lane_fraction = 0.45;  // of the nearest lane's width (0.5 x 0.9 in the code)
+  double wrong_direction_deg = 120.0;
+  double wrong_direction_min_speed_mps = 0.5;
+  int wrong_direction_steps = 2000;
+  double too_slow_speed_mps = 0.01;
+  int too_slow_steps = 2000;
+  int too_slow_grace_steps = 2000;
+};
+
 // Thresholds of the events.
 struct EventConfig {
+  EventRules rules = EventRules::kStrict;
+  IndriveCodeRules code;
   double lane_invasion_overlap_m = 0.3;
   double wrong_direction_deg = 90.0;
   double stall_speed_mps = 1.0 / 3.6;
@@ -116,6 +153,10 @@ class EventDetector {
   bool sumo_only_collision() const { return sumo_only_collision_; }
   // Road status of an ego pose (no state).
   RoadStatus road_status(const Pose2& pose) const;
+  // Lane invasions since reset(): entries into the strict rule's lane_invasion condition. Under
+  // the public InDRiVE code's rules they end nothing and are only counted; under the strict
+  // rules the first ends the episode.
+  int lane_invasions() const { return lane_invasions_; }
 
   const EventConfig& config() const { return config_; }
 
@@ -123,7 +164,13 @@ class EventDetector {
   const RoadNetwork* net_;
   EventConfig config_;
   EgoParams ego_;
+  // The public InDRiVE code's rules (update_indrive_code()).
+  std::uint32_t update_indrive_code(const Inputs& inputs, std::uint32_t bits);
+
   int slow_steps_ = 0;
+  int wrong_way_steps_ = 0;
+  int lane_invasions_ = 0;
+  bool invading_ = false;
   const Route* route_ = nullptr;
   std::vector<bool> route_edges_;  // per network edge: the route drives it
   RoadStatus road_;

@@ -157,6 +157,9 @@ class RoadNetwork {
   // Bounding box of all lane surfaces and junction polygons.
   Eigen::Vector2d min_corner() const { return min_corner_; }
   Eigen::Vector2d max_corner() const { return max_corner_; }
+  // What the conversion added to the source's coordinates (SUMO's location netOffset; zero
+  // when the file has none).
+  const Eigen::Vector2d& offset() const { return offset_; }
   // Path the network was loaded from (empty when parsed from text).
   const std::filesystem::path& source() const { return source_; }
 
@@ -175,6 +178,7 @@ class RoadNetwork {
   std::unordered_map<std::string, int> edge_by_id_;
   Eigen::Vector2d min_corner_{0.0, 0.0};
   Eigen::Vector2d max_corner_{0.0, 0.0};
+  Eigen::Vector2d offset_{0.0, 0.0};
   std::filesystem::path source_;
   std::unique_ptr<Index> index_;
 };

@@ -1,9 +1,11 @@
 // Routes: the four fixed paths a task is driven on, and a tracker of progress along one.
 //
-// Every town has four routes, as in the paper: `straight` (point to point along a corridor,
+// Our towns have four routes of the paper's kinds: `straight` (point to point along a corridor,
 // no turns), `right_loop` (closed loop of right turns only), `left_loop` (closed loop of left
 // turns only) and `two_turn` (closed loop mixing left and right turns). Built-in towns ship
-// them in a YAML file; for any other network derive_routes() finds them. A Route is the lane
+// them in a YAML file; for any other network derive_routes() finds them. CARLA's towns
+// (carla_town01, carla_town02) ship the public InDRiVE code's routes instead: point-to-point
+// segments given by their end points (straight_1, right_1, ..., two_turn_1). A Route is the lane
 // sequence (internal junction lanes included) and dense waypoints every ~2 m.
 //
 //   std::vector<Route> routes = build_routes(net, read_route_file(path));
@@ -51,13 +53,59 @@ class RouteError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// Where a point-to-point route's end points are given.
+enum class PointFrame {
+  kNetwork,  // SUMO's network frame (metres, x east, y north)
+  kCarla,    // CARLA's world frame: x as the network's, y = -(network y), before the network's
+             // offset (carla_to_network())
+};
+
 // A route as stored in a file: the normal edges it drives, in order. A loop's last edge
 // connects back to its first.
+//
+// A point-to-point route may instead give its two end points (the public InDRiVE code's routes
+// are CARLA world coordinates): the route is then the shortest drivable path from the lane the
+// start point lies on to the lane the end point lies on (route_edges_between()), and it starts
+// and ends at the points' projections onto those lanes' centre lines. `edges` may still be
+// given; it must then be that path's edges.
 struct RouteSpec {
   std::string name;
   bool loop = false;
   std::vector<std::string> edges;
+  std::optional<Eigen::Vector2d> start;  // both or neither, never on a loop
+  std::optional<Eigen::Vector2d> end;
+  // Direction of travel at the points, when given (radians in `frame`: CARLA's yaw is clockwise,
+  // so a CARLA yaw of 90 degrees is a network heading of -90): only lanes within 90 degrees of
+  // it hold the point.
+  std::optional<double> start_heading_rad;
+  std::optional<double> end_heading_rad;
+  PointFrame frame = PointFrame::kNetwork;
+  std::string kind;  // a label written in the file (the code's "straight", "right", ...); free
 };
+
+// A CARLA world point in the network frame: CARLA's y axis is OpenDRIVE's -y, and netconvert
+// shifts OpenDRIVE coordinates by the network's offset (RoadNetwork::offset()).
+Eigen::Vector2d carla_to_network(const RoadNetwork& net, const Eigen::Vector2d& carla);
+
+// The shortest drivable path between two points, as route_edges_between() finds it.
+struct PointPath {
+  std::vector<std::string> edges;  // normal edges, first to last
+  int start_lane = -1;             // the lane of the first edge the start point lies on
+  int end_lane = -1;               // the lane of the last edge the end point lies on
+  double start_s_m = 0.0;          // the start point's arc length along start_lane
+  double end_s_m = 0.0;            // the end point's arc length along end_lane
+  double length_m = 0.0;           // driving distance from start to end
+};
+// Finds the shortest path of permitted moves (no U-turns) from a normal lane whose surface
+// holds `start` (within `margin_m` of its edge) to one that holds `end`, over every such pair
+// of lanes: on a two-way road that picks the lane whose direction leads to the end point.
+// Given a heading at a point, only lanes within 90 degrees of it count there. Throws
+// RouteError naming the point when no normal lane holds it or no path joins them.
+PointPath route_edges_between(const RoadNetwork& net, const Eigen::Vector2d& start,
+                              const Eigen::Vector2d& end,
+                              std::optional<double> start_heading_rad = std::nullopt,
+                              std::optional<double> end_heading_rad = std::nullopt,
+                              double margin_m = 0.5);
 
 // A point on the route's centre line.
 struct Waypoint {
@@ -99,6 +147,9 @@ class Route {
   double length_m() const { return length_m_; }
   // Pose at the first waypoint, facing along the route.
   Pose2 start_pose() const;
+  // Where a point-to-point route ends: its end point as given (network frame) for a route
+  // given by points, else its terminal waypoint; a loop's start.
+  const Eigen::Vector2d& destination() const { return destination_; }
   // Pose on the route centre line at arc length s_m (wrapped for loops, clamped otherwise).
   Pose2 pose_at(double s_m) const;
   // Projects a point onto the centre line, searching only arc lengths within `window_m` of
@@ -110,6 +161,9 @@ class Route {
   int next_waypoint(double s_m) const;
 
  private:
+  // Keeps the centre line between arc lengths from_s and to_s (from_s < to_s).
+  void trim_line(double from_s, double to_s);
+
   RouteSpec spec_;
   std::vector<int> lanes_;
   std::vector<TurnDirection> turns_;
@@ -119,6 +173,7 @@ class Route {
   std::vector<int> line_lane_;         // lane of the segment starting at each point
   std::vector<Waypoint> waypoints_;
   double length_m_ = 0.0;
+  Eigen::Vector2d destination_{0.0, 0.0};
 };
 
 // What one tracker update reports.
@@ -158,8 +213,10 @@ class RouteTracker {
   RouteStep last_;
 };
 
-// Reads route specs from a YAML file (a map from route name to {loop: bool, edges: [ids]});
-// throws RouteError when the file is missing or malformed.
+// Reads route specs from a YAML file: a map from route name to {loop: bool, edges: [ids]}, or,
+// for a point-to-point route, {kind: label, start: [x, y], end: [x, y]} in the network frame or
+// {kind: label, carla_start: [x, y], carla_end: [x, y]} in CARLA's world frame. Throws
+// RouteError when the file is missing or malformed.
 std::vector<RouteSpec> read_route_file(const std::filesystem::path& path);
 // Writes route specs in the format read_route_file() reads.
 void write_route_file(const std::filesystem::path& path, const std::vector<RouteSpec>& specs);

@@ -2,7 +2,10 @@
 //
 // A town spec is one of
 //   - a built-in name: `town01` (training town, ~400 x 330 m, T-junctions, one lane per
-//     direction) or `town02` (held-out town, ~200 x 200 m, smaller blocks);
+//     direction) or `town02` (held-out town, ~200 x 200 m, smaller blocks), our own designs;
+//     `carla_town01` or `carla_town02`, CARLA's Town01 and Town02 (the paper's towns, shipped as
+//     OpenDRIVE under their MIT licence, envserver/data/towns/CARLA-LICENSE.txt) with the public
+//     InDRiVE code's point-to-point routes;
 //   - a path to a SUMO `.net.xml`;
 //   - a path to an OpenDRIVE `.xodr`, converted by netconvert;
 //   - `grid:<seed>`, a procedural grid town made by netgenerate.
@@ -54,6 +57,8 @@ inline bool is_route_set(std::string_view name) {
 
 // The built-in town names.
 std::vector<std::string> builtin_towns();
+// True when `spec` is one of them.
+bool is_builtin_town(const std::string& spec);
 
 // Returns the path of a .net.xml for a town spec, converting and caching as needed. Throws
 // MapError when the spec names nothing that exists or conversion fails (with netconvert's
@@ -66,13 +71,17 @@ struct Town {
   std::string name;  // the spec it was loaded from
   std::filesystem::path net_file;
   RoadNetwork net;
-  std::vector<Route> routes;  // in kRouteNames order
+  std::vector<Route> routes;  // in file order (kRouteNames order for our towns and derived ones)
   std::vector<SpawnPoint> spawns;
 };
 
 // Resolves, parses and prepares a town: built-in towns read their shipped route file, others
 // derive their routes from the network. Throws MapError or RouteError.
 Town load_town(const std::string& spec, const TownOptions& options = {});
+
+// The route names of a town without loading its network: a built-in town's from its route
+// file, the four kRouteNames for any other. Throws MapError or RouteError.
+std::vector<std::string> town_route_names(const std::string& spec, const TownOptions& options = {});
 
 // Draws the network (lanes, junctions), the routes (one colour each, with start marker and
 // direction arrows) and the spawn points to a PNG at `pixels_per_m`; throws MapError when the

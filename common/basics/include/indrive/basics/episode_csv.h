@@ -29,8 +29,11 @@ struct EpisodeRecord {
   bool success = false;
   std::string failure_reason;  // empty on success: collision, lane_invasion, off_road, ...
   int steps = 0;
-  double route_completion = 0.0;  // fraction of the route driven, 0..1
-  double episode_return = 0.0;    // task return; 0 in zero-shot evaluation
+  double route_completion = 0.0;    // fraction of the route driven, 0..1
+  double episode_return = 0.0;      // task return; 0 in zero-shot evaluation
+  std::string protocol = "strict";  // the rules that judged it: strict | indrive_code
+  int lane_invasions = 0;           // entries into the lane-invasion condition (terminal under
+                                    // strict, so 0 or 1 there; counted under indrive_code)
 };
 
 // A results file could not be read; the message names the file, line and column.
@@ -57,7 +60,13 @@ class EpisodeCsvWriter {
   std::filesystem::path path_;
   std::ofstream out_;
   long long rows_ = 0;
+  bool v1_ = false;  // the file has episode_csv_header_v1()
 };
+
+// The header of files written before the protocol and lane_invasions columns: such files are
+// read as strict evaluations, lane_invasions 1 where lane_invasion ended the episode. A writer
+// appending to one (a resumed run's) keeps its columns and refuses rows of another protocol.
+const std::string& episode_csv_header_v1();
 
 // Reads every record of one file. Throws CsvError for a wrong header, a wrong number of
 // fields or a value that does not parse.
