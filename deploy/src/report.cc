@@ -348,14 +348,24 @@ std::string render_markdown(const Report& report, const std::string& seen_name,
   for (const auto& [key, table] : report.tables) {
     md << "\n## " << title_of(key) << "\n";
     for (const auto& town : table.towns) {
+      // The routes evaluated in this town (the CARLA towns' differ from ours and each other).
+      std::vector<std::string> routes;
+      for (const auto& route : table.routes) {
+        for (const auto& method : table.methods) {
+          if (find_cell(table, method, town, route) != nullptr) {
+            routes.push_back(route);
+            break;
+          }
+        }
+      }
       md << "\n### " << town << "\n\n| method |";
-      for (const auto& route : table.routes) md << " " << route << " SR | FR | n |";
+      for (const auto& route : routes) md << " " << route << " SR | FR | n |";
       md << "\n|---|";
-      for (std::size_t i = 0; i < table.routes.size(); ++i) md << "---|---|---|";
+      for (std::size_t i = 0; i < routes.size(); ++i) md << "---|---|---|";
       md << "\n";
       for (const auto& method : table.methods) {
         md << "| " << method << " |";
-        for (const auto& route : table.routes) {
+        for (const auto& route : routes) {
           const CellStats* s = find_cell(table, method, town, route);
           if (s == nullptr) {
             md << " - | - | 0 |";

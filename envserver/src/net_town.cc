@@ -210,10 +210,14 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
   if (std::find(towns.begin(), towns.end(), spec) != towns.end()) {
     const fs::path folder = data_dir(options) / "towns";
     if (spec.starts_with("carla_")) {
-      // CARLA's own maps (towns/CARLA-LICENSE.txt), converted as any .xodr given by path.
+      // CARLA's own maps (towns/CARLA-LICENSE.txt), converted as any .xodr given by path but
+      // without their traffic lights: the camera renders none and no rule judges them, so
+      // traffic yields by priority at every junction, as on our towns (docs/architecture.md
+      // section 9 has what the lights cost an oracle under the strict budget).
       const fs::path xodr = folder / (spec + ".xodr");
       if (!fs::is_regular_file(xodr, ec)) missing_builtin(xodr);
-      std::vector<std::string> argv = {netconvert.string(), "--opendrive-files", xodr.string()};
+      std::vector<std::string> argv = {netconvert.string(), "--opendrive-files", xodr.string(),
+                                       "--tls.discard-loaded", "true"};
       argv.insert(argv.end(), kCommonOptions.begin(), kCommonOptions.end());
       return convert_cached(spec, {xodr}, argv, options);
     }

@@ -2,6 +2,7 @@
 // route's {kind, start, end}).
 #include <yaml-cpp/yaml.h>
 
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <tuple>
@@ -19,8 +20,17 @@ Eigen::Vector2d read_point(const YAML::Node& node, const std::string& key,
   if (!node.IsSequence() || (node.size() != 2 && node.size() != 3)) {
     throw RouteError("'" + key + "' must be a point [x, y] or [x, y, heading_deg]");
   }
-  if (node.size() == 3) heading_rad = node[2].as<double>() * M_PI / 180.0;
-  return {node[0].as<double>(), node[1].as<double>()};
+  // Within a million kilometres: any map's coordinates, and no overflow in the lane index.
+  std::array<double, 3> values{0.0, 0.0, 0.0};
+  for (std::size_t i = 0; i < node.size(); ++i) {
+    values[i] = node[i].as<double>();
+    if (!std::isfinite(values[i]) || std::abs(values[i]) > 1e9) {
+      throw RouteError("'" + key + "' holds '" + node[i].as<std::string>() +
+                       "'; give finite coordinates (metres) and a heading in degrees");
+    }
+  }
+  if (node.size() == 3) heading_rad = values[2] * M_PI / 180.0;
+  return {values[0], values[1]};
 }
 
 }  // namespace

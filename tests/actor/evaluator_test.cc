@@ -143,7 +143,7 @@ TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
 
   // The report's cells, from the same rows: one seed and one density, so SR = successes / n.
   const deploy::Report report = deploy::aggregate(rows);
-  const deploy::Table& table = report.tables.at({"zero_shot", "exploration"});
+  const deploy::Table& table = report.tables.at({"strict", "zero_shot", "exploration"});
   EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "right_loop"}));
   EXPECT_EQ(table.methods, (std::vector<std::string>{"oracle", "random"}));
   const std::string csv = deploy::render_csv(report);

@@ -44,12 +44,12 @@ fs::path write_run(const fs::path& dir, int lines, double slope) {
       << "1000,10,disag,zero_shot,exploration,town02,straight,5,1,2,1,0,collision,30,0.5,0\n"
       << "2000,20,disag,zero_shot,exploration,town02,straight,5,1,2,0,1,,80,1.0,0\n";
   std::ofstream(dir / "eval" / "evaluator-0.csv")
-      << episode_csv_header() << "\n"
+      << episode_csv_header_v1() << "\n"  // a file of an older build: read as strict
       << "run,disag,zero_shot,exploration,0,7,town02,straight,5,101,11,0,1,,59,1.0,0\n"
       << "run,disag,zero_shot,exploration,0,7,town02,straight,5,101,12,1,0,lane_invasion,40,0.3,"
          "0\n";
   std::ofstream(dir / "train-episodes.csv")
-      << episode_csv_header() << "\n"
+      << episode_csv_header_v1() << "\n"  // a file of an older build: read as strict
       << "run,disag,training,lane_following,0,3,town01,straight,10,5,6,0,1,,250,1.0,240.5\n"
       << "run,disag,training,lane_following,0,4,town01,right_loop,10,5,6,1,0,off_route,90,0.2,"
          "30.5\n";

@@ -360,10 +360,23 @@ TEST(Report, TheCarlaTownsRoutesSortByKind) {
   for (const std::string route : {"two_turn_1", "left_1", "straight_2", "right_1", "straight_1"}) {
     add_episodes(records, "disag", 0, "carla_town01", route, 10, 1, 1, "", "indrive_code");
   }
+  add_episodes(records, "disag", 0, "carla_town02", "two_turn_2", 10, 1, 1, "", "indrive_code");
   const Report report = aggregate(records);
-  EXPECT_EQ(
-      report.tables.begin()->second.routes,
-      (std::vector<std::string>{"straight_1", "straight_2", "right_1", "left_1", "two_turn_1"}));
+  EXPECT_EQ(report.tables.begin()->second.routes,
+            (std::vector<std::string>{"straight_1", "straight_2", "right_1", "left_1", "two_turn_1",
+                                      "two_turn_2"}));
+  // Each town's table lists the routes evaluated there.
+  const std::string md = render_markdown(report, "town01", "town02");
+  const auto town01 = md.find("### carla_town01"), town02 = md.find("### carla_town02");
+  ASSERT_NE(town01, std::string::npos);
+  ASSERT_NE(town02, std::string::npos);
+  const std::string first = md.substr(town01, town02 - town01);
+  EXPECT_NE(first.find("two_turn_1 SR"), std::string::npos) << first;
+  EXPECT_EQ(first.find("two_turn_2 SR"), std::string::npos) << first;
+  const std::string second = md.substr(town02, md.find("###", town02 + 3) - town02);
+  EXPECT_EQ(second,
+            "### carla_town02\n\n| method | two_turn_2 SR | FR | n |\n|---|---|---|---|\n"
+            "| disag | 100.0 [20.7, 100.0] | 0.0 | 1 |\n\n");
 }
 
 }  // namespace

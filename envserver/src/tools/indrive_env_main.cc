@@ -43,8 +43,10 @@ constexpr const char* kUsage = R"(usage:
       (lists the routes of the route set (env.route_set), warns of any approach two routes leave by different exits, and
        bounds what a policy that sees no route can follow: junctions that offer the same
        exits but where routes take different ones)
-Routes: straight, right_loop, left_loop, two_turn (empty: random spawn, no route).
-The follower policy needs a route.)";
+Towns: town01, town02 (ours), carla_town01, carla_town02 (CARLA's), a .net.xml or .xodr file,
+grid:<seed>. Routes: straight, right_loop, left_loop, two_turn on ours and derived ones; the
+CARLA towns' are the public InDRiVE code's (`indrive-env routes` lists them: straight_1, ...).
+Empty: random spawn, no route. The follower policy needs a route.)";
 
 // Flags of the form --name value (or --name alone for booleans).
 std::map<std::string, std::string> parse_flags(int argc, char** argv, int first) {
