@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# The evaluations behind this page, from the repository root after `bash deploy/setup.sh build`.
+# Each writes runs/carla-*/<name>/eval/evaluator-0.csv; the page's eval/ holds copies.
+set -euo pipefail
+bin=build/bin
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
+evaluate() { # out_dir protocol episodes_per_cell [indrive-actor options ...]
+  local dir=$1 protocol=$2 episodes=$3
+  shift 3
+  rm -rf "$dir"
+  mkdir -p "$dir"
+  "$bin/indrive-actor" --evaluate --run-dir "$dir" --set preset=tiny --set run.seed=0 \
+    --set eval.towns=carla_town01,carla_town02 --set "eval.episodes_per_cell=$episodes" \
+    --set "eval.protocol=$protocol" "$@" --log-level warn
+}
+
+# 1. Sanity bounds: the scripted route follower and uniform random actions, 50 episodes per cell.
+for p in strict indrive_code; do
+  for policy in oracle random; do evaluate "runs/carla-sanity/$policy-$p" "$p" 50 --policy "$policy"; done
+done
+
+# 2. The seed-0 policies of docs/results/route-sets/ (trained on our town01) on the CARLA towns,
+#    20 episodes per cell.
+snap=docs/results/route-sets/snapshots
+for p in strict indrive_code; do
+  for m in disag icm rnd; do
+    evaluate "runs/carla-shipped/zeroshot-$m-$p" "$p" 20 --snapshot "$snap/s0-pretrain-$m.params" \
+      --set eval.kind=zero_shot --set "agent.intrinsic.method=$m"
+  done
+  for t in lf ca; do
+    task=$([[ $t == lf ]] && echo lane_following || echo collision_avoidance)
+    evaluate "runs/carla-shipped/fewshot-$t-disag-$p" "$p" 20 --snapshot "$snap/s0-finetune-$t-disag.params" \
+      --set eval.kind=few_shot --set agent.intrinsic.method=disag --set "agent.task=$task"
+    evaluate "runs/carla-shipped/fewshot-$t-dreamer-$p" "$p" 20 --snapshot "$snap/s0-dreamer-$t.params" \
+      --set eval.kind=few_shot --set agent.phase=dreamer --set "agent.task=$task"
+  done
+done
+
+# 3. The grid on the CARLA towns (pretraining on carla_town01, evaluation under both
+#    protocols, 50 episodes per cell): one chain per seed and method, resumable. On
+#    2026-12-06: seed 0 of disag, icm and random (rnd not yet).
+for m in disag icm rnd; do
+  deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --seed 0 --method "$m" \
+    --stages "pretrain zeroshot" --episodes 50
+done
+deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --seed 0 --method random \
+  --stages "pretrain zeroshot" --episodes 50
+
+# The page: each evaluation's CSV under sanity/eval/ and shipped/eval/ with their reports, and
+# the grid's runs, CSVs, seed-0 snapshots, pretraining summary and report.
+page=docs/results/carla-towns
+for part in sanity shipped; do
+  mkdir -p "$page/$part/eval"
+  for d in runs/carla-$part/*/; do
+    [[ -f $d/eval/evaluator-0.csv ]] && cp "$d/eval/evaluator-0.csv" "$page/$part/eval/$(basename "$d").csv"
+  done
+  $bin/indrive report "$page/$part/eval" --out "$page/$part"
+done
+deploy/experiments/paper_grid.sh publish --out runs/carla-grid --page docs/results/carla-towns \
+  --snapshot-seeds 0
