@@ -52,8 +52,7 @@ void set_grid_routes(ProtocolGrid& grid, const std::string& routes,
       throw EvalError("evaluation town '" + town + "': " + error.what());
     }
   }
-  // Towns that share a route list (our two, any derived one) could have used `routes`; the
-  // per-town map says the same and keeps one rule.
+  // Every town reads its own list; `routes` keeps the first town's, so that the grid validates.
   if (!grid.towns.empty()) grid.routes = grid.town_routes[grid.towns.front()];
 }
 
