@@ -382,8 +382,10 @@ std::string render_markdown(const Report& report, const std::string& seen_name,
     for (const auto& town : table.towns) md << " " << town << " |";
     // The gap between the towns named, or between their CARLA namesakes in a table of CARLA
     // towns only (town01 -> carla_town01).
-    const auto holds = [&](const std::string& town) {
-      return std::find(table.towns.begin(), table.towns.end(), town) != table.towns.end();
+    // (A lambda may not capture the structured binding `table` under clang 14.)
+    const std::vector<std::string>& towns = table.towns;
+    const auto holds = [&towns](const std::string& town) {
+      return std::find(towns.begin(), towns.end(), town) != towns.end();
     };
     const bool carla_pair = !holds(seen_name) && !holds(heldout_name) &&
                             holds("carla_" + seen_name) && holds("carla_" + heldout_name);
