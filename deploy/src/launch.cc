@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include "indrive/basics/log.h"
@@ -121,7 +122,6 @@ void write_status_json(const fs::path& run_dir, const std::vector<ChildStatus>& 
 std::vector<ProcessSpec> launch_plan(const LaunchOptions& options) {
   const fs::path run_dir = options.runs_dir / options.run_id;
   const fs::path logs = run_dir / "logs";
-  fs::create_directories(logs);
   const auto args = common_args(options, run_dir);
   std::vector<ProcessSpec> plan;
 
@@ -181,9 +181,75 @@ void set_openmp_wait_defaults() {
   ::setenv("GOMP_SPINCOUNT", "100000", /*overwrite=*/0);
 }
 
+int launch_exit_code(const std::vector<ChildStatus>& processes) {
+  int exit_code = 0;
+  for (const auto& status : processes) {
+    if (status.name == "learner") {
+      // A learner stopped by our own SIGTERM counts as a clean stop.
+      exit_code = status.last_exit_code == 128 + SIGTERM ? 0 : status.last_exit_code;
+    }
+  }
+  // A process that used up its restarts failed the run too, even when the learner ended well.
+  for (const auto& status : processes) {
+    if (exit_code == 0 && status.state == ChildState::kFailed) {
+      exit_code = status.last_exit_code != 0 ? status.last_exit_code : 1;
+    }
+  }
+  return exit_code;
+}
+
+std::optional<std::string> check_launch_plan(const std::vector<ProcessSpec>& plan,
+                                             std::chrono::seconds limit) {
+  Supervisor checks;
+  std::set<std::string> roles;
+  for (const auto& spec : plan) {
+    // "actor-1" and "evaluator-0" have the roles "actor" and "evaluator": one check each.
+    const std::string role = spec.name.substr(0, spec.name.find('-'));
+    if (!roles.insert(role).second) continue;
+    ProcessSpec check{.name = role, .argv = spec.argv, .restart = RestartPolicy::kNever};
+    check.argv.push_back("--check-config");
+    checks.add(std::move(check));
+  }
+  std::map<std::string, std::string> last_line;
+  checks.on_line([&](const std::string& name, const std::string& line) {
+    if (!line.empty()) last_line[name] = line;
+  });
+  checks.start();
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  while (checks.poll(std::chrono::milliseconds(50))) {
+    if (std::chrono::steady_clock::now() > deadline) {
+      checks.stop(std::chrono::seconds(2));
+      return "the configuration checks did not finish within " + std::to_string(limit.count()) +
+             " s";
+    }
+  }
+  for (const auto& status : checks.status()) {
+    if (status.last_exit_code == 0) continue;
+    std::string message = last_line[status.name];
+    // The programs' log lines start "<date> <time> E [role] "; the message is what follows.
+    if (const auto bracket = message.find("] "); bracket != std::string::npos) {
+      message = message.substr(bracket + 2);
+    }
+    return "the " + status.name + " refuses the configuration (exit " +
+           std::to_string(status.last_exit_code) + "): " + message;
+  }
+  return std::nullopt;
+}
+
 int run_launch(const LaunchOptions& options) {
+  auto plan = launch_plan(options);
+  // Every role checks the configuration the way it will read it, before anything starts: a
+  // typo is refused in about a second instead of after a round of restarts.
+  if (const auto refusal = check_launch_plan(plan)) {
+    std::fprintf(stderr,
+                 "launch: %s\nlaunch: nothing was started; fix the config or the --set "
+                 "override and launch again\n",
+                 refusal->c_str());
+    return 2;
+  }
+  fs::create_directories(options.runs_dir / options.run_id / "logs");
   Supervisor supervisor;
-  for (auto& spec : launch_plan(options)) supervisor.add(std::move(spec));
+  for (auto& spec : plan) supervisor.add(std::move(spec));
   supervisor.on_line([](const std::string& name, const std::string& line) {
     std::printf("%-12s | %s\n", name.c_str(), line.c_str());
     std::fflush(stdout);
@@ -243,13 +309,12 @@ int run_launch(const LaunchOptions& options) {
   std::printf("%-12s | stopping all processes\n", "launch");
   supervisor.stop(std::chrono::seconds(15));
   g_supervisor = nullptr;
-  int exit_code = 0;
   for (const auto& status : supervisor.status()) {
-    if (status.name == "learner") {
-      // A learner stopped by our own SIGTERM counts as a clean stop.
-      exit_code = status.last_exit_code == 128 + SIGTERM ? 0 : status.last_exit_code;
-    }
+    if (status.state != ChildState::kFailed) continue;
+    std::printf("%-12s | %s failed for good: exit code %d after %d restart(s)\n", "launch",
+                status.name.c_str(), status.last_exit_code, status.restarts);
   }
+  const int exit_code = launch_exit_code(supervisor.status());
   if (page.enabled()) {
     page.refresh(supervisor.status(), /*ended=*/true,
                  "ended " + local_time_now() + ", learner exit code " + std::to_string(exit_code));

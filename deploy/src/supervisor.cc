@@ -217,8 +217,11 @@ void Supervisor::reap() {
     const bool failed = code != 0;
     const double uptime_s = std::chrono::duration<double>(now - child.started_at).count();
     if (uptime_s >= child.spec.backoff.stable_s) child.consecutive_failures = 0;
+    // A child we asked to stop (stop(), or the run's end for those that do not finish it) did
+    // not fail, whatever its exit code.
+    const bool stopped_by_us = stop_requested_ || (others_stopped_ && !child.spec.finishes_run);
     const bool may_restart = failed && child.spec.restart == RestartPolicy::kOnFailure &&
-                             !stop_requested_ && !(others_stopped_ && !child.spec.finishes_run) &&
+                             !stopped_by_us &&
                              (child.spec.backoff.max_restarts < 0 ||
                               child.status.restarts < child.spec.backoff.max_restarts);
     if (may_restart) {
@@ -233,7 +236,7 @@ void Supervisor::reap() {
           << child.spec.name << " ended with " << (signaled ? "signal " : "code ")
           << (signaled ? code - 128 : code) << "; restarting in " << delay_s << " s";
     } else {
-      child.status.state = failed && !stop_requested_ ? ChildState::kFailed : ChildState::kExited;
+      child.status.state = failed && !stopped_by_us ? ChildState::kFailed : ChildState::kExited;
       INDRIVE_LOG_AT(failed ? log::Level::kWarn : log::Level::kInfo, "launch")
           << child.spec.name << " " << child_state_name(child.status.state) << " (code " << code
           << ")";

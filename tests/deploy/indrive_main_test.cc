@@ -27,6 +27,24 @@ std::filesystem::path write_run(const std::filesystem::path& dir, double slope) 
   return dir;
 }
 
+// A typo in an override is refused by the launcher's checks before any process starts, with
+// the key named and a non-zero exit; no run folder is made.
+TEST(IndriveLaunch, ABadOverrideIsRefusedBeforeAnythingStarts) {
+  testing::TempDir dir;
+  const auto log = dir.path() / "launch.log";
+  testing::Child launch(
+      {kIndrive.string(), "launch", "--config",
+       std::string(INDRIVE_SOURCE_DIR) + "/deploy/configs/smoke.yaml", "--runs-dir",
+       (dir.path() / "runs").string(), "--run-id", "x", "--set", "agent.replay.length=-5"},
+      log);
+  EXPECT_EQ(launch.wait(60s), 2) << testing::slurp(log);
+  const std::string output = testing::slurp(log);
+  EXPECT_NE(output.find("refuses the configuration"), std::string::npos) << output;
+  EXPECT_NE(output.find("replay.length must be >= 2, got -5"), std::string::npos) << output;
+  EXPECT_NE(output.find("nothing was started"), std::string::npos) << output;
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "runs" / "x"));
+}
+
 TEST(IndriveCompare, GroupsAndRunsMixAndTheirEndsArePrinted) {
   testing::TempDir dir;
   const auto a = write_run(dir.path() / "s0", 0.01).string();

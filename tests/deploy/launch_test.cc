@@ -1,11 +1,13 @@
 #include "indrive/deploy/launch.h"
 
 #include <gtest/gtest.h>
+#include <signal.h>
 
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -85,7 +87,8 @@ TEST(LaunchPlan, StartsOneLearnerActorsAndEvaluatorsWithSharedArguments) {
     EXPECT_EQ(after("--set"), "train.updates=10") << spec.name;
     EXPECT_EQ(spec.log_file.parent_path(), dir.path() / "smoke" / "logs") << spec.name;
   }
-  EXPECT_TRUE(std::filesystem::is_directory(dir.path() / "smoke" / "logs"));
+  // The plan alone makes no folder: a launch that its checks refuse leaves nothing behind.
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "smoke"));
 }
 
 TEST(LaunchStatus, StatusJsonHasEveryProcessAndTheRunsState) {
@@ -122,6 +125,7 @@ TEST(LaunchPage, TheRunsPageIsRefreshedWhileItRunsAndSaysHowItEnded) {
   {
     std::ofstream learner(bin / "indrive-learner");
     learner << "#!/bin/sh\n"
+               "case \" $* \" in *\" --check-config \"*) echo config ok; exit 0;; esac\n"
                "while [ \"$1\" != --run-dir ]; do shift; done; run=$2\n"
                "for i in 1 2 3; do\n"
                "  echo \"{\\\"env_steps\\\": $((i * 100)), \\\"wm/recon\\\": $i}\" >> "
@@ -131,7 +135,7 @@ TEST(LaunchPage, TheRunsPageIsRefreshedWhileItRunsAndSaysHowItEnded) {
                "cp \"$run/index.html\" \"$run/seen-while-running.html\"\n"
                "exit 0\n";
     std::ofstream actor(bin / "indrive-actor");
-    actor << "#!/bin/sh\nexec sleep 30\n";
+    actor << "#!/bin/sh\ncase \" $* \" in *\" --check-config \"*) exit 0;; esac\nexec sleep 30\n";
   }
   std::filesystem::permissions(bin / "indrive-learner", std::filesystem::perms::owner_all);
   std::filesystem::permissions(bin / "indrive-actor", std::filesystem::perms::owner_all);
@@ -166,6 +170,82 @@ TEST(LaunchPage, TheRunsPageIsRefreshedWhileItRunsAndSaysHowItEnded) {
   EXPECT_EQ(run_launch(options), 0);
   EXPECT_FALSE(std::filesystem::exists(dir.path() / "runs" / "unpaged" / "index.html"));
   EXPECT_FALSE(std::filesystem::exists(dir.path() / "runs" / "unpaged" / "status.json"));
+}
+
+// Writes an executable stand-in script into `bin`.
+void stand_in(const std::filesystem::path& bin, const std::string& name, const std::string& body) {
+  std::filesystem::create_directories(bin);
+  std::ofstream(bin / name) << "#!/bin/sh\n" << body;
+  std::filesystem::permissions(bin / name, std::filesystem::perms::owner_all);
+}
+
+// Stand-ins that record every start in <bin>/starts; the evaluator's --check-config runs
+// `evaluator_check`.
+LaunchOptions recording_launch(const testing::TempDir& dir, const std::string& evaluator_check) {
+  const auto bin = dir.path() / "bin";
+  const std::string record = "echo \"$*\" >> " + (bin / "starts").string() + "\n";
+  stand_in(bin, "indrive-learner",
+           record + "case \" $* \" in *\" --check-config \"*) exit 0;; esac\nsleep 1; exit 0\n");
+  stand_in(bin, "indrive-actor",
+           record + "case \" $* \" in *\" --evaluate \"*\" --check-config \"*) " + evaluator_check +
+               ";; *\" --check-config \"*) exit 0;; esac\nexec sleep 30\n");
+  std::ofstream(dir.path() / "config.yaml") << "preset: tiny\n";
+  return {.config = dir.path() / "config.yaml",
+          .runs_dir = dir.path() / "runs",
+          .run_id = "r",
+          .actors = 2,
+          .evaluators = 1,
+          .bin_dir = bin,
+          .status_interval_s = 60.0,
+          .dashboard_interval_s = 0.0};
+}
+
+std::vector<std::string> lines_of(const std::filesystem::path& file) {
+  std::vector<std::string> lines;
+  std::ifstream in(file);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+// One role refusing the configuration stops the launch before any process starts: each role is
+// checked once (one actor for both), the refusal names the role and carries its message.
+TEST(LaunchCheck, ARoleThatRefusesTheConfigurationStopsTheLaunchBeforeAnythingStarts) {
+  testing::TempDir dir;
+  const LaunchOptions options = recording_launch(
+      dir,
+      "echo \"2026-12-07 01:00:00.000 E [actor] indrive-actor failed: invalid agent config: "
+      "replay.length must be >= 2, got -5\" >&2; exit 1");
+  const auto refusal = check_launch_plan(launch_plan(options));
+  ASSERT_TRUE(refusal.has_value());
+  EXPECT_EQ(*refusal,
+            "the evaluator refuses the configuration (exit 1): indrive-actor failed: invalid agent "
+            "config: replay.length must be >= 2, got -5");
+  EXPECT_EQ(run_launch(options), 2);
+  EXPECT_FALSE(std::filesystem::exists(options.runs_dir / "r")) << "nothing made, nothing run";
+  const auto starts = lines_of(options.bin_dir / "starts");
+  ASSERT_EQ(starts.size(), 6u) << "learner, actor and evaluator checked once, twice over";
+  for (const auto& line : starts) EXPECT_NE(line.find("--check-config"), std::string::npos) << line;
+}
+
+TEST(LaunchExit, AProcessThatUsedUpItsRestartsFailsTheRunEvenWhenTheLearnerEndedWell) {
+  const ChildStatus learner_done{.name = "learner", .state = ChildState::kExited};
+  const ChildStatus actor_stopped{
+      .name = "actor-0", .state = ChildState::kExited, .last_exit_code = 128 + SIGTERM};
+  EXPECT_EQ(launch_exit_code({learner_done, actor_stopped}), 0);
+  const ChildStatus evaluator_failed{
+      .name = "evaluator-0", .state = ChildState::kFailed, .restarts = 5, .last_exit_code = 3};
+  EXPECT_EQ(launch_exit_code({learner_done, actor_stopped, evaluator_failed}), 3);
+  // Its own code first: the learner's failure says more than a follower's.
+  const ChildStatus learner_failed{
+      .name = "learner", .state = ChildState::kFailed, .restarts = 10, .last_exit_code = 1};
+  EXPECT_EQ(launch_exit_code({learner_failed, evaluator_failed}), 1);
+  // A learner our own SIGTERM stopped (Ctrl-C) ended cleanly.
+  const ChildStatus learner_stopped{
+      .name = "learner", .state = ChildState::kExited, .last_exit_code = 128 + SIGTERM};
+  EXPECT_EQ(launch_exit_code({learner_stopped, actor_stopped}), 0);
+  // A process that failed with code 0 (it could not be started again) still fails the run.
+  const ChildStatus unstartable{.name = "actor-1", .state = ChildState::kFailed};
+  EXPECT_EQ(launch_exit_code({learner_done, unstartable}), 1);
 }
 
 }  // namespace

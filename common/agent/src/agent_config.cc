@@ -238,7 +238,8 @@ void validate(const AgentConfig& config) {
           "finetune_world_model already trains the continuation head with the rest of the world "
           "model: set finetune_cont to false");
   const ReplayConfig& r = config.replay;
-  require(r.batch >= 1 && r.length >= 2, "replay.batch >= 1 and replay.length >= 2");
+  require(r.batch >= 1, "replay.batch must be >= 1, got " + std::to_string(r.batch));
+  require(r.length >= 2, "replay.length must be >= 2, got " + std::to_string(r.length));
   require(r.capacity >= r.length, "replay.capacity must hold at least one sequence");
 }
 

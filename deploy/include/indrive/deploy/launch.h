@@ -4,7 +4,9 @@
 // and runs it under a Supervisor with a combined progress view.
 #pragma once
 
+#include <chrono>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,7 +39,14 @@ void write_status_json(const std::filesystem::path& run_dir,
 // The process specs for `options`: the learner (essential: its clean exit ends the run; a crash
 // is restarted with back-off, at most 10 times), actors restarted on failure with back-off,
 // evaluators restarted at most 5 times. Output of each goes to <run>/logs/<name>.log too.
+// Creates nothing.
 std::vector<ProcessSpec> launch_plan(const LaunchOptions& options);
+
+// Runs each role of `plan` once (learner, actor, evaluator) with --check-config, side by side,
+// and waits up to `limit`. Returns the first refusal, "the <role> refuses the configuration
+// (exit N): <its message>", or nothing when every role accepts it.
+std::optional<std::string> check_launch_plan(const std::vector<ProcessSpec>& plan,
+                                             std::chrono::seconds limit = std::chrono::seconds(60));
 
 // Sets, for the children started afterwards, how idle OpenMP threads wait, unless the
 // environment already says: OMP_WAIT_POLICY=passive (the processes share the cores; spinning
@@ -46,10 +55,17 @@ std::vector<ProcessSpec> launch_plan(const LaunchOptions& options);
 // threads through the kernel). OpenMP reads both once, when a process loads it.
 void set_openmp_wait_defaults();
 
-// Runs the plan until the learner ends or SIGINT/SIGTERM arrives, then stops everything.
+// The launch's exit code from its processes' last states: the learner's (0 when our SIGTERM
+// stopped it); when that is 0, the first process that failed for good (used up its restarts)
+// gives its exit code (1 if it was 0).
+int launch_exit_code(const std::vector<ChildStatus>& processes);
+
+// Checks the plan's configuration (check_launch_plan) and returns 2 with the refusal on stderr
+// when a role refuses it, before anything starts or any folder is made. Otherwise runs the plan
+// until the learner ends or SIGINT/SIGTERM arrives, then stops everything.
 // Meanwhile refreshes the run's page every dashboard_interval_s (the coverage map redrawn, the
 // page reloading itself) and writes it a last time when the run has ended; prints its path.
-// Returns the learner's exit code (0 on a clean stop by signal).
+// Returns launch_exit_code().
 int run_launch(const LaunchOptions& options);
 
 }  // namespace indrive::deploy
