@@ -189,7 +189,15 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
   corrupt.checksum(corrupt.checksum() ^ 1u);
   ASSERT_TRUE(chunk_writer->write(corrupt));
   chunk_writer->wait_for_acknowledgments(5000ms);
-  std::this_thread::sleep_for(1500ms);  // one metrics interval
+  // Until a metrics line counts both (one comes every second), not for a fixed time.
+  const auto counted_deadline = std::chrono::steady_clock::now() + 60s;
+  while (std::chrono::steady_clock::now() < counted_deadline && learner->running()) {
+    const auto line = last_metrics();
+    if (line.value("dropped_wrong_run", 0) >= 1 && line.value("dropped_bad_checksum", 0) >= 1) {
+      break;
+    }
+    std::this_thread::sleep_for(200ms);
+  }
   EXPECT_TRUE(learner->running()) << logs();
 
   // SIGTERM: the learner checkpoints and exits cleanly.
@@ -270,6 +278,11 @@ TEST_F(ServiceTest, ALearnerAtItsBudgetAnnouncesItsLastSnapshotReliablyBeforeExi
   fs::create_directories(run_dir_);
   std::ofstream(run_dir_ / "final-snapshot.params") << "an earlier end of this run";
   auto learner = start_learner(budget);
+  // The budget comes from the actor's steps, so the actor starts only once this observer has
+  // found the learner's writers: on a warm machine the whole run takes about 3.5 s, less than
+  // discovery may take on a busy one, and an announce sent before the match is never heard.
+  ASSERT_TRUE(announce_reader->wait_for_matched(1, 60s)) << logs();
+  ASSERT_TRUE(snapshot_reader->wait_for_matched(1, 60s)) << logs();
   auto actor = start_actor(0, budget);
   ASSERT_EQ(learner->wait(150s), 0) << logs();
   actor->signal(SIGTERM);
