@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Sets up InDRiVE-on-SUMO on a Debian 12 machine, builds it, and runs the main job or the tests.
 #
-#   bash deploy/setup.sh run    # install what is missing, build, run the main job (tiny preset)
-#   bash deploy/setup.sh test   # install what is missing, build, run the tests and a brief fuzz
+#   bash deploy/setup.sh run    # install what is missing, build the programs, run the main job
+#   bash deploy/setup.sh test   # install what is missing, build everything, run the tests and a
+#                               # brief fuzz
 #   bash deploy/setup.sh build  # install what is missing and build only
 #   bash deploy/setup.sh deps   # install what is missing only (the Docker image's first layer)
 #
@@ -64,16 +65,18 @@ install_missing() {
     "${missing[@]}"
 }
 
+# build [TARGET]: everything, or one target (`programs`: what the main job runs, no tests).
 build() {
-  local jobs
+  local jobs target=()
   jobs=$(nproc)
+  [[ $# -gt 0 ]] && target=(--target "$1")
   if [ ! -f "$build_dir/build.ninja" ]; then
     say "configuring into $build_dir"
     # shellcheck disable=SC2086  # INDRIVE_CMAKE_ARGS is a list of options
     cmake -S "$root" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release ${INDRIVE_CMAKE_ARGS:-}
   fi
-  say "building with $jobs jobs"
-  cmake --build "$build_dir" -j "$jobs"
+  say "building ${1:-everything} with $jobs jobs"
+  cmake --build "$build_dir" -j "$jobs" "${target[@]}"
 }
 
 run_tests() {
@@ -97,6 +100,6 @@ case "$mode" in
   deps) install_missing ;;
   build) install_missing; build ;;
   test) install_missing; build; run_tests ;;
-  run) install_missing; build; run_main ;;
+  run) install_missing; build programs; run_main ;;
   *) echo "usage: $0 run|test|build|deps" >&2; exit 2 ;;
 esac

@@ -1,5 +1,7 @@
 #include "indrive/deploy/dashboard.h"
 
+#include <fcntl.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -335,8 +337,21 @@ std::optional<fs::path> browser_video(const fs::path& source, const fs::path& ta
                       static_cast<int>(in.get(cv::CAP_PROP_FRAME_HEIGHT)));
   fs::create_directories(target.parent_path());
   const fs::path partial = target.string() + ".partial.webm";
+  // OpenCV 4.6 prints "tag 0x30385056/'VP80' is not supported with codec id 139 and format
+  // 'webm / WebM'" to stderr for every WebM it opens, then uses VP8 anyway; the line reads as an
+  // error in the main job's output, so stderr is closed while the writer opens (a real failure
+  // is caught by isOpened() below).
+  const int saved_stderr = ::dup(STDERR_FILENO);
+  if (const int null_fd = ::open("/dev/null", O_WRONLY); null_fd >= 0) {
+    ::dup2(null_fd, STDERR_FILENO);
+    ::close(null_fd);
+  }
   cv::VideoWriter out(partial.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('V', 'P', '8', '0'),
                       fps, size, true);
+  if (saved_stderr >= 0) {
+    ::dup2(saved_stderr, STDERR_FILENO);
+    ::close(saved_stderr);
+  }
   if (!out.isOpened()) {
     INDRIVE_LOG(kWarn, "dashboard") << "cannot write a WebM video (OpenCV's FFmpeg backend, VP8); "
                                     << source.string() << " is left out";
@@ -583,6 +598,42 @@ std::string dashboard_chart_group(const std::string& metric) {
   return "other";
 }
 
+// The runs' evaluation videos, transcoded beside the page, as the page's videos section; counts
+// them in `videos`.
+std::string videos_section(const DashboardInput& input, const fs::path& page_dir,
+                           std::size_t& videos) {
+  std::ostringstream html;
+  html << "<section id=\"videos\"><h2>Evaluation videos</h2>\n";
+  for (const auto& group : input.runs) {
+    for (const auto& run : group.runs) {
+      const std::vector<fs::path> files = run_files(run / "videos", "", ".mp4");
+      const std::string run_name = run.lexically_normal().filename().string();
+      for (std::size_t i = 0; i < files.size() && i < kMaxVideosPerRun; ++i) {
+        const fs::path target =
+            page_dir / "media" / (run_name + "-" + files[i].stem().string() + ".webm");
+        const auto video = browser_video(files[i], target);
+        if (!video) continue;
+        html << "<figure><video controls muted loop preload=\"metadata\" src=\"media/"
+             << escape_html(video->filename().string()) << "\"></video><figcaption>"
+             << escape_html(run_name + ": " + files[i].filename().string())
+             << "</figcaption></figure>\n";
+        ++videos;
+      }
+      if (files.size() > kMaxVideosPerRun) {
+        html << "<p class=\"note\">" << files.size() - kMaxVideosPerRun << " more in "
+             << escape_html((run / "videos").string()) << "</p>\n";
+      }
+    }
+  }
+  if (videos == 0) {
+    html << "<p class=\"note\">no videos (evaluators record them with "
+            "eval.video_episodes)</p>\n";
+  }
+  html << "</section>\n";
+
+  return html.str();
+}
+
 std::string render_dashboard(const DashboardInput& input, const fs::path& page_dir,
                              DashboardStats* stats, DashboardCache* cache) {
   if (input.runs.empty()) throw std::invalid_argument("dashboard: name at least one run");
@@ -607,6 +658,8 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   const std::vector<Chart> charts = build_charts(input.runs, cache);
   std::size_t points = 0;
   const std::string data = charts_json(charts, &points);
+  std::size_t videos = 0;
+  const std::string videos_html = videos_section(input, page_dir, videos);
 
   std::ostringstream html;
   html << "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>indrive: "
@@ -642,6 +695,8 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   html << "</div><nav><a href=\"#curves\">curves</a><a href=\"#tables\">tables</a>"
           "<a href=\"#maps\">maps</a><a href=\"#videos\">videos</a><a href=\"#processes\">"
           "processes</a><a href=\"#config\">config</a></nav></header>\n<main>\n";
+  // Videos first where they are the point of the page (the main job's learned policy).
+  if (input.videos_first) html << videos_html;
 
   // Curves, grouped.
   html << "<section id=\"curves\"><h2>Curves</h2><div class=\"controls\">against "
@@ -717,35 +772,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   }
   html << "</section>\n";
 
-  // Videos, transcoded beside the page.
-  std::size_t videos = 0;
-  html << "<section id=\"videos\"><h2>Evaluation videos</h2>\n";
-  for (const auto& group : input.runs) {
-    for (const auto& run : group.runs) {
-      const std::vector<fs::path> files = run_files(run / "videos", "", ".mp4");
-      const std::string run_name = run.lexically_normal().filename().string();
-      for (std::size_t i = 0; i < files.size() && i < kMaxVideosPerRun; ++i) {
-        const fs::path target =
-            page_dir / "media" / (run_name + "-" + files[i].stem().string() + ".webm");
-        const auto video = browser_video(files[i], target);
-        if (!video) continue;
-        html << "<figure><video controls muted loop preload=\"metadata\" src=\"media/"
-             << escape_html(video->filename().string()) << "\"></video><figcaption>"
-             << escape_html(run_name + ": " + files[i].filename().string())
-             << "</figcaption></figure>\n";
-        ++videos;
-      }
-      if (files.size() > kMaxVideosPerRun) {
-        html << "<p class=\"note\">" << files.size() - kMaxVideosPerRun << " more in "
-             << escape_html((run / "videos").string()) << "</p>\n";
-      }
-    }
-  }
-  if (videos == 0) {
-    html << "<p class=\"note\">no videos (evaluators record them with "
-            "evaluation.video_episodes)</p>\n";
-  }
-  html << "</section>\n";
+  if (!input.videos_first) html << videos_html;
 
   // Processes and the resolved configs.
   html << "<section id=\"processes\"><h2>Processes</h2>\n";

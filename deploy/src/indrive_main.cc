@@ -281,6 +281,8 @@ int main(int argc, char** argv) {
       "--out", dashboard_out,
       "page to write (default: RUN/index.html for one run; required for several)");
   dashboard_cmd->add_option("--title", dashboard.title, "page title (default: the run labels)");
+  dashboard_cmd->add_flag("--videos-first", dashboard.videos_first,
+                          "put the evaluation videos above the curves");
   dashboard_cmd
       ->add_option("--watch", dashboard_watch,
                    "rewrite the page every this many seconds until stopped (Ctrl-C); the page "

@@ -174,6 +174,16 @@ TEST(Dashboard, OneRunsPageHoldsEveryMetricLineTablesMapsVideoConfigAndProcesses
   EXPECT_EQ(html.find("<script src="), std::string::npos);
   EXPECT_EQ(html.find("http-equiv=\"refresh\""), std::string::npos);
   EXPECT_NE(html.find("ended 2026-12-03 01:00:00"), std::string::npos);  // from status.json
+  // Videos come after the curves, unless the page is about a policy driving.
+  EXPECT_LT(html.find("<section id=\"curves\">"), html.find("<section id=\"videos\">"));
+  const std::string videos_first =
+      render_dashboard({.runs = {single_run_group(run)}, .videos_first = true}, run);
+  EXPECT_LT(videos_first.find("<section id=\"videos\">"),
+            videos_first.find("<section id=\"curves\">"));
+  EXPECT_NE(videos_first.find("src=\"media/run-eval-town02-straight.webm\""), std::string::npos);
+  EXPECT_EQ(videos_first.find("<section id=\"videos\">"),
+            videos_first.rfind("<section id=\"videos\">"))
+      << "one videos section";
 }
 
 TEST(Dashboard, LiveAndEndedPagesSaySo) {

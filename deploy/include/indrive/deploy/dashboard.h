@@ -38,6 +38,9 @@ struct DashboardInput {
   // Shown in the header when the run has ended, e.g. "ended 2026-12-03 01:02:03, learner
   // exit code 0"; empty and not live: the page says when it was written.
   std::string ended;
+  // The evaluation videos above the curves (indrive dashboard --videos-first): for a page whose
+  // point is a policy driving, as the main job's.
+  bool videos_first = false;
   std::string seen_town = "town01";  // the report's generalisation-gap columns
   std::string heldout_town = "town02";
 };
