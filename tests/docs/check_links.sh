@@ -6,8 +6,9 @@
 # repository root); an #anchor is stripped before the check, and http(s):, mailto: and pure
 # #anchor links are not checked. Links inside fenced code blocks and `code spans` are not links.
 #
-# Files: every tracked *.md of the repository (README.md, docs/**/*.md, ...) except those under
-# build/ and runs/; without git, every *.md found under the root outside those folders.
+# Files: every *.md of the repository that git tracks or would track (README.md, docs/**/*.md,
+# ...; not ignored ones) except those under build/ and runs/; without git, every *.md found
+# under the root outside those folders.
 #
 #   bash tests/docs/check_links.sh [REPO_ROOT]     # default: this script's ../..
 #
@@ -27,7 +28,8 @@ files=()
 if git -C "$root" rev-parse --is-inside-work-tree >/dev/null 2>&1; then
   while IFS= read -r f; do
     files+=("$f")
-  done < <(git -C "$root" ls-files -- '*.md' | grep -Ev '^(build|runs)/' || true)
+  done < <(git -C "$root" ls-files --cached --others --exclude-standard -- '*.md' |
+           grep -Ev '^(build|runs)/' | sort -u || true)
 else
   while IFS= read -r f; do
     files+=("${f#./}")
