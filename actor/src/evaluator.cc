@@ -245,8 +245,8 @@ struct Evaluator::Impl {
   // file is of this run, newer than `after` and of this evaluator's architecture; else nullptr.
   // It is how an evaluator that received no final snapshot over DDS still evaluates the run's
   // end: one restarted after the learner exited, or one its learner's samples never reached
-  // (a participant left deaf by a killed process's shared-memory port, docs/architecture.md
-  // section 8). Also nullptr when the file's version is under `at_least` (the final version
+  // (a participant left deaf by a killed process's shared-memory port, docs/operations.md).
+  // Also nullptr when the file's version is under `at_least` (the final version
   // announced, or a snapshot already held).
   std::shared_ptr<const msg::PolicySnapshot> final_snapshot_from_file(std::uint64_t after,
                                                                       std::uint64_t at_least) {

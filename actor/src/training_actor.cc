@@ -223,7 +223,7 @@ struct TrainingActor::Impl {
   // callbacks wake it), and at least every kWaitTick for the timed duties (heartbeat, rejoin,
   // snapshot request). It used to poll every 2 ms: in a rate-limited run on 2 cores the actor
   // waits about 94% of the time, and each of those 500 wake-ups a second took a core from the
-  // learner's threads in the middle of an update (docs/architecture.md section 8).
+  // learner's threads in the middle of an update (docs/performance.md).
   void wait_for_allowance(const std::atomic<bool>& stop) {
     if (gate.may_step(own_steps.load())) return;
     constexpr auto kWaitTick = std::chrono::milliseconds(50);

@@ -13,7 +13,8 @@
 #
 # The long run (cpu preset; hours on a laptop-class CPU):
 #   deploy/experiments/exploration_and_fewshot.sh --out runs/explore-fewshot-cpu
-# The tiny preset at 20k exploration steps (about 20 minutes per seed on 2 cores; the README's):
+# The tiny preset at 20k exploration steps (about 20 minutes per seed on 2 cores;
+# docs/results/explore-fewshot-tiny/):
 #   deploy/experiments/exploration_and_fewshot.sh --preset tiny --explore-steps 20000 \
 #       --task-steps 5000 --prefill 1000 --eval-episodes 10 --eval-densities 5,10,20 --seed 0
 # Extra configuration for every run (repeatable), e.g. shorter replay windows so that the cpu

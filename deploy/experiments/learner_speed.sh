@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # How fast does the learner train on this machine? One command for every figure of the learner's
-# speed targets (README, "Measured figures"): the full agent update on `tiny` (1 and 2 threads)
+# speed targets (docs/performance.md): the full agent update on `tiny` (1 and 2 threads)
 # and `cpu` (2 threads) in fp32 and, where the CPU multiplies bf16 natively, in bf16; the PyTorch
 # reference of the same update (with --torch); and the service at replay ratio 32 (learner and
 # 1 or 2 actors as real processes) with the hours the paper's 5e5 env steps take. It writes
@@ -46,7 +46,7 @@ mkdir -p "$out/logs"
 logs="$out/logs"
 [[ $report_only == 0 || -f $logs/probe.txt ]] || { echo "--report-only: no earlier run in $out" >&2; exit 2; }
 
-# Targets of the learner's speed (the README's measured-figures section states them).
+# Targets of the learner's speed (docs/performance.md states them).
 target_cpu_s=0.8 target_tiny_s=0.04 target_torch_x=15 target_steps=90 target_tiny_h=1.5 target_cpu_h=4
 
 if ((!report_only)); then

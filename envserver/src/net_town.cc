@@ -212,8 +212,8 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
     if (spec.starts_with("carla_")) {
       // CARLA's own maps (towns/CARLA-LICENSE.txt), converted as any .xodr given by path but
       // without their traffic lights: the camera renders none and no rule judges them, so
-      // traffic yields by priority at every junction, as on our towns (docs/architecture.md
-      // section 9 has what the lights cost an oracle under the strict budget).
+      // traffic yields by priority at every junction, as on our towns (docs/decisions.md
+      // has what the lights cost an oracle under the strict budget).
       const fs::path xodr = folder / (spec + ".xodr");
       if (!fs::is_regular_file(xodr, ec)) missing_builtin(xodr);
       std::vector<std::string> argv = {netconvert.string(), "--opendrive-files", xodr.string(),

@@ -174,7 +174,7 @@ TEST(LayoutRuleBoundTest, ARouteThatTakesTwoExitsAtOneLayoutFollowsNoRule) {
 // follow two of the four, by the same rule on both towns: in the default set (right) "turn
 // right wherever the junction offers right, else go straight" follows straight and
 // right_loop; in the mirror set (left) "turn left wherever offered, else straight" follows
-// straight and left_loop. Average SR up to 50% (docs/architecture.md, section 9); the first
+// straight and left_loop. Average SR up to 50% (docs/decisions.md); the first
 // routes allowed one route (25%).
 TEST(LayoutRuleBoundTest, OneRuleFollowsStraightAndOneLoopOnBothBuiltInTowns) {
   struct Set {

@@ -216,7 +216,7 @@ TEST_F(TwoHosts, ALateEvaluatorOnTheOtherHostGetsTheNewestSnapshotOverUdp) {
 }
 
 // A link slower than the learner publishes: shaped to 16 Mbit/s, with the snapshot writer's
-// throughput limit set below that (dds.snapshot_rate_mb_s=1.6, docs/deploy.md), one tiny
+// throughput limit set below that (dds.snapshot_rate_mb_s=1.6, docs/operations.md), one tiny
 // snapshot takes over a second to cross while the learner makes one every 2 updates here. Were
 // each new snapshot written at once, it would replace the last in the writer's history under the
 // evaluator still fetching it, and the evaluator would never hold a whole one: the learner holds

@@ -1,6 +1,6 @@
 // NHWC convolution and transposed convolution as im2col + GEMM (the products in the kernel
 // layer, kernels.h). oneDNN's own convolution primitives were measured in their place
-// (docs/architecture.md, section 8: kernel layer) and were not faster over a whole update.
+// (docs/performance.md, "Kernel layer") and were not faster over a whole update.
 //
 // Both ops relate a "big" grid (Hb, Wb) and a "small" grid (Hs, Ws) by
 //   big = small * stride - padding + kernel_offset,

@@ -74,12 +74,12 @@ void declare_service_schema(config::Schema& schema) {
       schema.add_bool(name, text == "true",
                       "few-shot also trains the world model's continuation head (stop-gradient "
                       "features), so imagination learns where task episodes end; the paper keeps "
-                      "the world model frozen (an ablation, docs/architecture.md section 9)");
+                      "the world model frozen (an ablation, docs/decisions.md)");
     } else if (key == "finetune_world_model") {
       schema.add_bool(name, text == "true",
                       "few-shot also trains the whole world model on the task's replay, from the "
                       "pretrained weights; the paper keeps it frozen (an ablation, "
-                      "docs/architecture.md section 9; excludes finetune_cont)");
+                      "docs/decisions.md; excludes finetune_cont)");
     } else {
       double value = 0.0;
       std::from_chars(text.data(), text.data() + text.size(), value);
@@ -166,7 +166,7 @@ void declare_service_schema(config::Schema& schema) {
                   "rules that judge an episode: strict (ours: the route's budget, every road "
                   "rule and leaving the route end it) or indrive_code (the public InDRiVE "
                   "code's: 2 m of the end point by any path, a fixed budget; "
-                  "docs/architecture.md section 9)")
+                  "docs/evaluation.md)")
       .add_int("eval.indrive_code_budget_steps", 30000,
                "indrive_code: steps before an episode ends unfinished (the code's 30,000)", 1)
       .add_number_list("eval.densities", {5, 10, 20}, "densities of the evaluation grid", 0, 20)

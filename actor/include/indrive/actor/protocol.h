@@ -29,7 +29,7 @@ class EvalError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Which rules judge an evaluation episode (eval.protocol; docs/architecture.md section 9):
+// Which rules judge an evaluation episode (eval.protocol; docs/evaluation.md, "Two protocols"):
 //   strict        ours: the route's own step budget, every road rule ends the episode, leaving
 //                 the route (off_route) too; success within 10 m of the route's end
 //   indrive_code  the public InDRiVE code's: a fixed step budget (eval.indrive_code_budget_steps,

@@ -23,7 +23,7 @@
 //
 // Those are the strict rules (EventRules::kStrict), ours everywhere. Evaluation can instead
 // judge by the public InDRiVE code's rules (EventRules::kIndriveCode, eval.protocol:
-// indrive_code; docs/architecture.md section 9), where an episode ends only on
+// indrive_code; docs/evaluation.md), where an episode ends only on
 //   collision        as above
 //   out_of_lane      the ego's centre lies farther than 0.45 x the lane's width from the centre
 //                    line of the nearest lane (normal or internal), or on no lane at all

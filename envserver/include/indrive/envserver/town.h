@@ -44,7 +44,7 @@ struct TownOptions {
   std::filesystem::path netgenerate;
   // Route set of the built-in towns (routes/ for "right", routes/<set>/ otherwise): "right"
   // ships routes one layout rule follows with straight and right_loop, "left" the mirror
-  // design (straight and left_loop); see kRouteSets and docs/architecture.md section 9.
+  // design (straight and left_loop); see kRouteSets and docs/decisions.md.
   std::string route_set = "right";
 };
 

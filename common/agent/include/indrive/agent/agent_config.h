@@ -82,7 +82,7 @@ struct IntrinsicConfig {
   int rnd_embed = 256;  // output size of the RND target/predictor
   // Scale of each module's raw signal before anything else is applied to it (LD: the reward
   // is disag_scale * mean variance; ICM and RND: Norm(scale * error)). One rule sets all three
-  // (docs/architecture.md "Intrinsic reward scale"): the raw signal must reach the actor-critic
+  // (docs/decisions.md "Intrinsic reward scale"): the raw signal must reach the actor-critic
   // at order 1, above the return normaliser's floor and wider than a two-hot bin. LD's 1e4 is
   // Plan2Explore's intrinsic_reward_scale; ICM's and RND's come from the same rule, measured.
   float disag_scale = 1e4f;
@@ -146,19 +146,19 @@ struct AgentConfig {
   // The backward pass of an update runs its independent parts (world model, intrinsic module,
   // actor-critic) side by side, one thread each (true), or one after another with each op split
   // over the threads (false). Gradients are bitwise the same either way with one thread; which
-  // is faster depends on the sizes, measured per preset (docs/architecture.md section 8): true
+  // is faster depends on the sizes, measured per preset (docs/performance.md): true
   // for tiny, false for cpu and small.
   bool backward_parts = false;
   // Few-shot (finetune) also trains the world model's continuation head, on stop-gradient
   // features like the reward head, so that imagination learns where the task's episodes end
   // (leaving the route, reaching the destination: events pretraining never has). The paper
   // and the project's contract keep the whole world model frozen (false); an ablation
-  // (docs/architecture.md section 9).
+  // (docs/decisions.md).
   bool finetune_cont = false;
   // Few-shot also trains the whole world model (representation, dynamics, decoder and heads)
   // on the task's replay, as DreamerV3 from scratch does, from the pretrained weights; the paper
   // and the project's contract keep it frozen (false). An ablation of whether the frozen
-  // model's pretraining coverage limits few-shot (docs/architecture.md section 9). Includes the
+  // model's pretraining coverage limits few-shot (docs/decisions.md). Includes the
   // continuation head, so it excludes finetune_cont.
   bool finetune_world_model = false;
   std::uint64_t seed = 0;

@@ -2,7 +2,7 @@
 //
 // The programs that compute (learner, actor, evaluator, local trainer) take SIGINT and SIGTERM
 // on a thread of their own and block them in every other thread
-// (service::install_stop_signals, docs/architecture.md section 8). A blocked signal mask
+// (service::install_stop_signals, docs/operations.md). A blocked signal mask
 // survives exec: a child started as it is would keep SIGTERM pending forever and could only be
 // killed. Children are therefore started with nothing blocked and every signal at its default
 // action:
