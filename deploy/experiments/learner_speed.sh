@@ -85,7 +85,8 @@ first_log=$logs/probe.txt
 ((report_only)) || "$bin/common_agent_bench" --preset tiny --threads 1 --iters 1 > "$first_log" 2>&1
 kernels=$(grep -m1 '^kernels:' "$first_log" || true)
 precisions="fp32"
-grep -q 'no native bf16' "$first_log" || precisions="fp32 bf16"
+# auto: what precision auto chooses by measuring the model's products at the agent's start.
+grep -q 'no native bf16' "$first_log" || precisions="fp32 bf16 auto"
 best=$(echo "$precisions" | awk '{ print $NF }')
 echo "$kernels"
 
@@ -153,16 +154,33 @@ for precision in $precisions; do
     target=$target_cpu_s
     [[ $preset == tiny ]] && target=$target_tiny_s
     [[ $threads == 1 ]] && target=""  # the targets are for 2 threads
-    row "full agent update" "$preset, $precision, $threads thread$( ((threads > 1)) && echo s)" \
+    label=$precision
+    if [[ $precision == auto ]]; then
+      label="auto ($(for f in "$logs/$preset-auto-t$threads"-*.txt; do
+        sed -n 's/^precision_choice chosen=\([a-z0-9]*\).*/\1/p' "$f"; done | sort | uniq -c |
+        awk '{ printf "%s%s %sx", (NR > 1 ? ", " : "chose "), $2, $1 }'))"
+    fi
+    row "full agent update" "$preset, $label, $threads thread$( ((threads > 1)) && echo s)" \
       "$s" s "$target" le
   done
 done
+# auto against the faster of the two forced precisions, in the same run: at most 5% slower.
+if [[ $precisions == *auto* ]]; then
+  for spec in "tiny 2" "tiny 1" "cpu 2"; do
+    read -r preset threads <<< "$spec"
+    m() { for f in "$logs/$preset-$1-t$threads"-*.txt; do field "$f" "agent_update " sec; done | median; }
+    ratio=$(awk -v a="$(m auto)" -v f="$(m fp32)" -v b="$(m bf16)" 'BEGIN {
+      best = (f < b ? f : b); if (a > 0 && best > 0) printf "%.3f", a / best }')
+    row "auto over the faster forced precision" "$preset, $threads thread$( ((threads > 1)) && echo s)" \
+      "$ratio" x 1.05 le
+  done
+fi
 {
   echo
   echo "| bound at the measured peak | GFLOP of products | product peak, GFLOP/s | bound, s |"
   echo "|---|---|---|---|"
 } >> "$report"
-for precision in $precisions; do
+for precision in ${precisions/ auto/}; do
   for preset in tiny cpu; do
     f="$logs/$preset-$precision-t2-1.txt"
     [[ -f $f ]] || continue

@@ -45,7 +45,7 @@ double unix_time_s() {
 struct Learner::Impl {
   explicit Impl(const service::ServiceConfig& service)
       : config(service),
-        agent_config(service.agent()),
+        agent_config(service.training_agent("learner")),
         run(RunDir::open_or_create(service.run_dir().parent_path().empty()
                                        ? fs::path(".")
                                        : service.run_dir().parent_path(),

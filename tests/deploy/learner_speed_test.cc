@@ -18,10 +18,14 @@ const fs::path kScript = fs::path(INDRIVE_SOURCE_DIR) / "deploy/experiments/lear
 using testing::write_text;
 
 // The lines of a common_agent_bench run that the report reads.
-std::string bench_log(double seconds, double gflop, double fp32_peak, double bf16_peak = 0) {
-  return "kernels: oneDNN 2.6.3 on avx512_core_bf16; products bf16 on AVX512_BF16\n"
-         "product_peak fp32_gflops=" +
-         std::to_string(fp32_peak) + " bf16_gflops=" + std::to_string(bf16_peak) +
+std::string bench_log(double seconds, double gflop, double fp32_peak, double bf16_peak = 0,
+                      const std::string& auto_chose = "") {
+  return "kernels: oneDNN 2.6.3 on avx512_core_bf16; products bf16 on AVX512_BF16\n" +
+         (auto_chose.empty() ? std::string()
+                             : "precision_choice chosen=" + auto_chose +
+                                   " fp32_gflops=300 bf16_gflops=500 (precision auto: ...)\n") +
+         "product_peak fp32_gflops=" + std::to_string(fp32_peak) +
+         " bf16_gflops=" + std::to_string(bf16_peak) +
          "\npreset=x method=disag threads=2\n"
          "agent_update sec=" +
          std::to_string(seconds) +
@@ -58,6 +62,12 @@ TEST(LearnerSpeedReport, EveryFigureAgainstItsTargetFromTheLogs) {
     write_text(logs / ("tiny-bf16-t1-" + n + ".txt"), bench_log(0.05, 5.3, 200, 320));
     write_text(logs / ("cpu-fp32-t2-" + n + ".txt"), bench_log(cpu_fp32[i], 282, 400, 650));
     write_text(logs / ("cpu-bf16-t2-" + n + ".txt"), bench_log(cpu_bf16[i], 282, 400, 650));
+    // auto: bf16 where it chose bf16, fp32 at 1 thread, where it chose fp32 and was slower.
+    write_text(logs / ("tiny-auto-t2-" + n + ".txt"),
+               bench_log(tiny_bf16[i], 5.3, 400, 650, "bf16"));
+    write_text(logs / ("tiny-auto-t1-" + n + ".txt"), bench_log(0.06, 5.3, 200, 320, "fp32"));
+    write_text(logs / ("cpu-auto-t2-" + n + ".txt"),
+               bench_log(cpu_bf16[i], 282, 400, 650, i == 0 ? "fp32" : "bf16"));
   }
   write_text(logs / "torch-cpu.txt", "torch_ratio torch_sec=20.0 ours_sec=1.25 speedup=16.0x\n");
   write_text(logs / "service.txt",
@@ -79,12 +89,21 @@ TEST(LearnerSpeedReport, EveryFigureAgainstItsTargetFromTheLogs) {
   has(report, "| full agent update | tiny, bf16, 1 thread | 0.05 s |  | no target |");
   has(report, "| full agent update | cpu, fp32, 2 threads | 2 s | <= 0.8 s | not met |");
   has(report, "| full agent update | cpu, bf16, 2 threads | 0.8 s | <= 0.8 s | met |");
+  // What auto chose in each run, and its update against the faster forced precision.
+  has(report,
+      "| full agent update | tiny, auto (chose bf16 3x), 2 threads | 0.035 s | <= 0.04 s | met |");
+  has(report, "| full agent update | cpu, auto (chose bf16 2x, fp32 1x), 2 threads | 0.8 s |");
+  has(report,
+      "| auto over the faster forced precision | tiny, 2 threads | 1.000 x | <= 1.05 x | met |");
+  has(report,
+      "| auto over the faster forced precision | tiny, 1 thread | 1.200 x | <= 1.05 x | not met |");
+  EXPECT_EQ(report.find("| tiny auto, 2 threads |"), std::string::npos) << "no bound row for auto";
   // The bound: the update's product GFLOP over the peak of its precision.
   has(report, "| cpu bf16, 2 threads | 282.000000 | 650.000000 | 0.434 |");
   has(report, "| cpu fp32, 2 threads | 282.000000 | 400.000000 | 0.705 |");
   // PyTorch: the cpu ratio has the target; tiny was not run.
-  has(report, "| times faster than PyTorch | cpu, bf16, 2 threads | 16.0 x | >= 15 x | met |");
-  has(report, "| times faster than PyTorch | tiny, bf16, 2 threads | - x |  | not measured |");
+  has(report, "| times faster than PyTorch | cpu, auto, 2 threads | 16.0 x | >= 15 x | met |");
+  has(report, "| times faster than PyTorch | tiny, auto, 2 threads | - x |  | not measured |");
   // Service: steps/s at least 90, hours 5e5 / rate.
   has(report, "| env steps/s at ratio 32 | tiny, 1 actor | 95.0 steps/s | >= 90 steps/s | met |");
   has(report, "| hours for 5e5 env steps | tiny, 1 actor | 1.46 h | <= 1.5 h | met |");

@@ -143,7 +143,6 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
   const int side = agent::preset("tiny").world_model.image;
 
   ProcessWatch watch(domain, profile);
-  auto writer = watch.participant().make_writer<msg::TrajectoryChunk>();
   Child launcher({std::string(INDRIVE_BIN_DIR) + "/indrive",
                   "launch",
                   "--config",
@@ -192,6 +191,13 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
                                    : std::int64_t{0};
     return std::max(heard, newest_learner_env_steps(run_dir));
   };
+  // After many SIGKILLs the watch's own participant can come out of Fast DDS's reset of the
+  // killed processes' shared-memory ports deaf (ProcessWatch::replace_if_unheard): a process
+  // alive but unheard for longer than the launcher's longest restart back-off (30 s) means that.
+  const auto replace_if_deaf = [&] {
+    return watch.replace_if_unheard(
+        {{msg::ROLE_LEARNER, 0}, {msg::ROLE_ACTOR, 0}, {msg::ROLE_ACTOR, 1}}, 45.0);
+  };
   // The learner writes this file when it ends at its budget (and removes it when it starts).
   const auto run_ended = [&] { return fs::exists(run_dir / "final-snapshot.params"); };
   ASSERT_TRUE(wait_until(120s, [&] {
@@ -221,13 +227,13 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
   ChunkForge forge("soak", side);
   std::map<std::string, int> injected;
   const auto inject = [&](const std::string& kind) {
-    if (kind == "bad_checksum") writer->write(forge.bad_checksum());
-    if (kind == "wrong_run") writer->write(forge.wrong_run());
-    if (kind == "bad_shape") writer->write(forge.bad_shape());
+    if (kind == "bad_checksum") watch.chunk_writer().write(forge.bad_checksum());
+    if (kind == "wrong_run") watch.chunk_writer().write(forge.wrong_run());
+    if (kind == "bad_shape") watch.chunk_writer().write(forge.bad_shape());
     if (kind == "duplicate") {
       const auto chunk = forge.valid();
-      writer->write(chunk);
-      writer->write(chunk);
+      watch.chunk_writer().write(chunk);
+      watch.chunk_writer().write(chunk);
     }
     ++injected[kind];
   };
@@ -238,6 +244,7 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
   bool overtaken = false;  // a kill whose restart the run's end made unnecessary
   while (!overtaken && learner_steps() < chaos_until && watch.now_s() - chaos_start < 1800.0) {
     ASSERT_TRUE(launcher.running()) << "the launcher gave up\n" << logs();
+    replace_if_deaf();
     inject(kinds[rng() % kinds.size()]);
     if (watch.now_s() >= next_kill) {
       // Victims come in rounds: every role once per round, in a random order, so that even the
@@ -285,10 +292,15 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
   // chunk goes out 5 times and must be counted 5 times more.
   if (!overtaken) {
     // Matched: the watch's own reader and the learner's.
-    ASSERT_TRUE(wait_until(120s, [&] {
-      return writer->matched() >= 2 && !learner_lines(run_dir).empty();
-    })) << logs();
-    writer->wait_for_acknowledgments(10000ms);
+    ASSERT_TRUE(wait_until(180s,
+                           [&] {
+                             replace_if_deaf();
+                             return watch.chunk_writer().matched() >= 2 &&
+                                    !learner_lines(run_dir).empty();
+                           }))
+        << watch.describe() << "\n"
+        << logs();
+    watch.chunk_writer().wait_for_acknowledgments(10000ms);
     // Two metrics lines after the last chaos chunk was acknowledged: the learner's loop has
     // drained it by the second, however slow the machine.
     const std::size_t lines_at_ack = learner_lines(run_dir).size();
@@ -298,7 +310,7 @@ TEST(ChaosSoak, RandomKillsAndBadChunksKeepTheRunsInvariants) {
     for (int i = 0; i < 5; ++i) {
       for (const auto& kind : kinds) inject(kind);
     }
-    ASSERT_TRUE(writer->wait_for_acknowledgments(20000ms)) << logs();
+    ASSERT_TRUE(watch.chunk_writer().wait_for_acknowledgments(20000ms)) << logs();
     nlohmann::json after;
     ASSERT_TRUE(wait_until(30s,
                            [&] {

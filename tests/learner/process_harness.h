@@ -102,6 +102,9 @@ class ProcessWatch {
   // actor's newest chunk and each process's newest heartbeat, with their times.
   std::string describe();
   dds::Participant& participant() { return *participant_; }
+  // A writer of trajectory chunks on the current participant, made anew with it: take it again
+  // after every call that may replace the participant.
+  dds::Writer<msg::TrajectoryChunk>& chunk_writer() { return *chunk_writer_; }
   // With DDS Security, a handshake of this watch's participant pending for
   // dds::Participant::kHandshakeStallS never completes (seen in the two-host security test on
   // 2026-12-05: the watch never authenticated one actor, so none of its chunks arrived), where a
@@ -133,6 +136,7 @@ class ProcessWatch {
   SteadyClock::time_point start_ = SteadyClock::now();
   std::unique_ptr<dds::Participant> participant_;
   std::unique_ptr<dds::Reader<msg::TrajectoryChunk>> chunk_reader_;
+  std::unique_ptr<dds::Writer<msg::TrajectoryChunk>> chunk_writer_;
   std::unique_ptr<dds::Reader<msg::PolicySnapshot>> snapshot_reader_;
   std::unique_ptr<dds::Reader<msg::Heartbeat>> heartbeat_reader_;
   std::mutex mutex_;

@@ -116,11 +116,8 @@ TrainMetrics StepTiming::as_metrics() const {
 
 Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   validate(config_);
-  try {
-    nn::set_precision(nn::resolve_precision(config_.precision));
-  } catch (const nn::PrecisionError& e) {
-    throw AgentConfigError(std::string("agent.") + e.what());
-  }
+  precision_ = choose_precision(config_);
+  nn::set_precision(precision_.precision);
   nn::flush_denormals();
   wm_ = std::make_unique<WorldModel>(config_.world_model, rng_);
   intrinsic_ = make_intrinsic(config_.intrinsic, config_.world_model, rng_);

@@ -5,7 +5,9 @@
 #include <cstdio>
 #include <set>
 
+#include "indrive/agent/precision_choice.h"
 #include "indrive/basics/data_path.h"
+#include "indrive/basics/log.h"
 #include "indrive/dds/participant.h"
 #include "indrive/dds/security.h"
 
@@ -279,6 +281,14 @@ agent::AgentConfig ServiceConfig::agent() const {
   }
   agent.seed = static_cast<std::uint64_t>(config_.get<std::int64_t>("run.seed"));
   return agent;
+}
+
+agent::AgentConfig ServiceConfig::training_agent(const char* log_tag) const {
+  agent::AgentConfig config = agent();
+  const agent::PrecisionChoice choice = agent::choose_precision(config, run_dir());
+  config.precision = std::string(nn::to_string(choice.precision));
+  INDRIVE_LOG(kInfo, log_tag) << choice.describe();
+  return config;
 }
 
 std::map<std::string, std::string> ServiceConfig::agent_choices() const {

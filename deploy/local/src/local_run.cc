@@ -43,7 +43,7 @@ RunDir open_run(const service::ServiceConfig& config) {
 // The agent's config for this process: random mode never leaves prefill, so it never trains.
 // A finetune without a checkpoint to start from is refused here, before SUMO starts.
 agent::AgentConfig local_agent_config(const service::ServiceConfig& config) {
-  agent::AgentConfig agent = config.agent();
+  agent::AgentConfig agent = config.training_agent("local");
   const bool resumable = CheckpointFiles(open_run(config).checkpoints(), 1000).newest().has_value();
   if (agent.phase == agent::Phase::kFinetune && !config.config().get<bool>("local.random") &&
       !resumable && config.config().get<std::string>("learner.init_checkpoint").empty()) {

@@ -26,6 +26,7 @@
 #include "indrive/agent/agent_config.h"
 #include "indrive/agent/behavior.h"
 #include "indrive/agent/intrinsic.h"
+#include "indrive/agent/precision_choice.h"
 #include "indrive/agent/replay.h"
 #include "indrive/agent/world_model.h"
 
@@ -74,6 +75,8 @@ class Agent {
   Phase phase() const { return config_.phase; }
   const AgentConfig& config() const { return config_; }
   std::int64_t train_steps() const { return train_steps_; }
+  // The precision of the products and how it was chosen (config.precision; "auto" measures).
+  const PrecisionChoice& precision_choice() const { return precision_; }
   // Stage timing of the last train_step.
   const StepTiming& last_timing() const { return timing_; }
   // The matrix-product FLOPs of each stage of the last update (nn::gemm_flops; the same
@@ -124,6 +127,7 @@ class Agent {
   bool task_actor_initialised_ = false;
   StepTiming timing_;
   StepTiming flops_;
+  PrecisionChoice precision_;
 };
 
 }  // namespace indrive::agent

@@ -64,6 +64,10 @@ class ServiceConfig {
 
   // The agent's configuration (preset sizes plus every agent.* key).
   agent::AgentConfig agent() const;
+  // agent() for the process that trains it: precision "auto" settled once per run by measuring
+  // the model's products (agent::choose_precision; <run>/precision.txt keeps the choice for a
+  // restarted learner) and logged under `log_tag`.
+  agent::AgentConfig training_agent(const char* log_tag) const;
   // The agent keys this configuration chose (a preset, a config file, --set), each with where
   // it was chosen: "preset" -> "--set preset=tiny", "world_model.deter" -> "preset 'tiny'" or
   // "--set agent.world_model.deter=64". Keys left at the defaults are not in it.
