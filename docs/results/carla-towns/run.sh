@@ -38,7 +38,7 @@ done
 
 # 3. The grid on the CARLA towns (pretraining on carla_town01, evaluation under both
 #    protocols, 50 episodes per cell): one chain per seed and method, resumable. On
-#    2026-12-06: seed 0 of disag, icm and random (rnd not yet).
+#    2026-12-06 and 2026-12-07: seed 0 of disag, icm, rnd and random.
 for m in disag icm rnd; do
   deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --seed 0 --method "$m" \
     --stages "pretrain zeroshot" --episodes 50
