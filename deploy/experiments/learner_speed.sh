@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # How fast does the learner train on this machine? One command for every figure of the learner's
 # speed targets (docs/performance.md): the full agent update on `tiny` (1 and 2 threads)
-# and `cpu` (2 threads) in fp32 and, where the CPU multiplies bf16 natively, in bf16; the PyTorch
+# and `cpu` (2 threads) in fp32 and, where the CPU multiplies bf16 natively, in bf16 and under
+# `precision: auto` (what it chose, and its ratio to the faster forced precision); the PyTorch
 # reference of the same update (with --torch); and the service at replay ratio 32 (learner and
 # 1 or 2 actors as real processes) with the hours the paper's 5e5 env steps take. It writes
 # report.md (each figure against its target, and the bound the machine's measured product peak
