@@ -123,11 +123,13 @@ class ProcessWatch {
   bool replace_if_unheard(const std::vector<std::pair<std::uint32_t, std::uint32_t>>& processes,
                           double silent_s);
   int replacements() const { return replacements_; }
+  // Replaces the participant now (close, open, count and log it), for a test that finds it
+  // deaf by other means (a process whose files show it running, unheard).
+  void replace(const std::string& why);
 
  private:
   void open();
   void close();
-  void replace(const std::string& why);  // close, open, count and log it
 
   dds::ParticipantOptions options_;
   int replacements_ = 0;
