@@ -9,11 +9,13 @@
 # sets), figures.csv and every program's output into the folder.
 #
 #   deploy/experiments/learner_speed.sh [--out DIR] [--bin DIR] [--repeats N] [--torch FILE]
-#                                       [--no-service] [--report-only]
+#                                       [--no-service] [--no-small] [--report-only]
 #
 # Defaults: runs/learner-speed, build/bin, 3 runs of each agent update (medians reported), no
-# PyTorch reference. Run it on an idle machine: it takes about 10 minutes on 2 cores (a few more
-# with --torch). --report-only writes the report again from the logs of an earlier run in DIR.
+# PyTorch reference, the `small` preset (the paper's model: update, bound, memory and hours; one
+# run per precision). Run it on an idle machine: it takes about 15 minutes on 2 cores (a few
+# more with --torch; 5 fewer with --no-small). --report-only writes the report again from the
+# logs of an earlier run in DIR.
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -22,6 +24,7 @@ out="$root/runs/learner-speed"
 repeats=3
 torch=""
 service=1
+small=1
 report_only=0
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -30,8 +33,9 @@ while [[ $# -gt 0 ]]; do
     --repeats) repeats=$2; shift 2 ;;
     --torch) torch=$2; shift 2 ;;
     --no-service) service=0; shift ;;
+    --no-small) small=0; shift ;;
     --report-only) report_only=1; shift ;;
-    -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -73,13 +77,17 @@ median() { sort -g | awk '{ v[NR] = $1 } END { if (NR) print (NR % 2 ? v[(NR + 1
 field() { grep -m1 "^$2" "$1" | tr ' ' '\n' | sed -n "s/^$3=\([0-9.]*\).*/\1/p" | head -1; }
 
 # The update runs: preset, threads, precision, repeats; logs/<preset>-<precision>-t<threads>-<i>.txt
+# (a fifth argument: the number of runs instead of --repeats). Each log ends with the run's
+# peak resident memory (max_rss_kb=, GNU time).
 bench() {
-  local preset=$1 threads=$2 precision=$3 iters=$4 i
-  for ((i = 1; i <= repeats; ++i)); do
+  local preset=$1 threads=$2 precision=$3 iters=$4 runs=${5:-$repeats} i
+  for ((i = 1; i <= runs; ++i)); do
     local log="$logs/$preset-$precision-t$threads-$i.txt"
-    echo "  common_agent_bench --preset $preset --threads $threads --precision $precision ($i of $repeats)"
-    "$bin/common_agent_bench" --preset "$preset" --threads "$threads" --iters "$iters" \
-      --precision "$precision" > "$log" 2>&1 || { echo "failed, see $log" >&2; exit 1; }
+    echo "  common_agent_bench --preset $preset --threads $threads --precision $precision ($i of $runs)"
+    /usr/bin/time -a -o "$log.rss" -f 'max_rss_kb=%M' "$bin/common_agent_bench" --preset "$preset" \
+      --threads "$threads" --iters "$iters" --precision "$precision" > "$log" 2>&1 ||
+      { echo "failed, see $log" >&2; exit 1; }
+    cat "$log.rss" >> "$log" && rm -f "$log.rss"
   done
 }
 first_log=$logs/probe.txt
@@ -98,6 +106,11 @@ if ((!report_only)); then
     bench tiny 1 "$precision" 60
     bench cpu 2 "$precision" 4
   done
+  # The paper's model (DreamerV3 v1 "small", 128x128 camera): about 12 s an update on 2 cores
+  # and 13 GB, so one run of 2 updates each (--no-small leaves it out).
+  if ((small)); then
+    for precision in $precisions; do bench small 2 "$precision" 2 1; done
+  fi
 
   if [[ -n $torch ]]; then
     echo "PyTorch reference (the same update), tiny and cpu, 2 threads:"
@@ -191,6 +204,38 @@ for precision in ${precisions/ auto/}; do
     echo "| $preset $precision, 2 threads | $gflop | $peak | $bound |" >> "$report"
   done
 done
+if compgen -G "$logs/small-*-t2-1.txt" > /dev/null; then
+  {
+    echo
+    echo "The paper's model, \`small\` (128x128 camera, deter 512; one run of 2 updates per precision,"
+    echo "2 threads). Hours are the learner's alone at replay ratio 32 (updates x update time; the"
+    echo "actors' time comes on top where they cannot keep up); no target yet."
+    echo
+    echo "| precision | update, s | GFLOP of products | bound at the peak, s | peak memory, GB | hours for 1e5 env steps | hours for 5e5 env steps |"
+    echo "|---|---|---|---|---|---|---|"
+  } >> "$report"
+  for precision in $precisions; do
+    f="$logs/small-$precision-t2-1.txt"
+    [[ -f $f ]] || continue
+    sec=$(field "$f" "agent_update " sec)
+    gflop=$(field "$f" agent_update_total gflop)
+    p=$precision
+    [[ $p == auto ]] && p=$(sed -n 's/^precision_choice chosen=\([a-z0-9]*\).*/\1/p' "$f")
+    peak=$(field "$f" product_peak "${p}_gflops")
+    frames=$(grep -m1 '^preset=' "$f" | awk '{ for (i = 1; i <= NF; ++i) { split($i, kv, "=");
+      if (kv[1] == "B") b = kv[2]; if (kv[1] == "T") t = kv[2] } } END { print b * t }')
+    rss=$(sed -n 's/^max_rss_kb=\([0-9]*\)/\1/p' "$f" | tail -1)
+    awk -v pr="$precision" -v p="$p" -v s="$sec" -v g="$gflop" -v pk="$peak" -v fr="$frames" \
+      -v rss="$rss" 'BEGIN {
+        label = (pr == "auto" ? "auto (chose " p ")" : pr)
+        bound = (pk > 0 ? sprintf("%.2f", g / pk) : "-")
+        mem = (rss > 0 ? sprintf("%.1f", rss / 1048576) : "-")
+        h1 = (fr > 0 && s > 0 ? sprintf("%.1f", 1e5 * 32 / fr * s / 3600) : "-")
+        h5 = (fr > 0 && s > 0 ? sprintf("%.1f", 5e5 * 32 / fr * s / 3600) : "-")
+        printf "| %s | %s | %s | %s | %s | %s | %s |\n", label, s, g, bound, mem, h1, h5 }' >> "$report"
+    echo "small,\"$precision, 2 threads\",$sec,s,,no target" >> "$csv"
+  done
+fi
 if [[ -f $logs/torch-tiny.txt || -f $logs/torch-cpu.txt ]]; then
   {
     echo

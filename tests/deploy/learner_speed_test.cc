@@ -26,7 +26,7 @@ std::string bench_log(double seconds, double gflop, double fp32_peak, double bf1
                                    " fp32_gflops=300 bf16_gflops=500 (precision auto: ...)\n") +
          "product_peak fp32_gflops=" + std::to_string(fp32_peak) +
          " bf16_gflops=" + std::to_string(bf16_peak) +
-         "\npreset=x method=disag threads=2\n"
+         "\npreset=x method=disag threads=2 B=16 T=64 H=15\n"
          "agent_update sec=" +
          std::to_string(seconds) +
          " cpu_sec=1 page_faults=0 frames_per_sec=1\n"
@@ -69,6 +69,11 @@ TEST(LearnerSpeedReport, EveryFigureAgainstItsTargetFromTheLogs) {
     write_text(logs / ("cpu-auto-t2-" + n + ".txt"),
                bench_log(cpu_bf16[i], 282, 400, 650, i == 0 ? "fp32" : "bf16"));
   }
+  // The paper's model: one run per precision, with its peak memory.
+  write_text(logs / "small-fp32-t2-1.txt",
+             bench_log(11.8, 2331, 400, 650) + "max_rss_kb=13000000\n");
+  write_text(logs / "small-bf16-t2-1.txt", bench_log(8.0, 2331, 400, 650));
+  write_text(logs / "small-auto-t2-1.txt", bench_log(8.1, 2331, 400, 650, "bf16"));
   write_text(logs / "torch-cpu.txt", "torch_ratio torch_sec=20.0 ours_sec=1.25 speedup=16.0x\n");
   write_text(logs / "service.txt",
              "scenario                     window_s  env_steps/s  per_actor  updates/s\n"
@@ -101,6 +106,11 @@ TEST(LearnerSpeedReport, EveryFigureAgainstItsTargetFromTheLogs) {
   // The bound: the update's product GFLOP over the peak of its precision.
   has(report, "| cpu bf16, 2 threads | 282.000000 | 650.000000 | 0.434 |");
   has(report, "| cpu fp32, 2 threads | 282.000000 | 400.000000 | 0.705 |");
+  // small: the update, its bound, memory and the learner's hours at ratio 32 (1024 frames a
+  // batch: 3,125 updates for 1e5 env steps).
+  has(report, "| fp32 | 11.800000 | 2331.000000 | 5.83 | 12.4 | 10.2 | 51.2 |");
+  has(report, "| bf16 | 8.000000 | 2331.000000 | 3.59 | - | 6.9 | 34.7 |");
+  has(report, "| auto (chose bf16) | 8.100000 | 2331.000000 | 3.59 | - | 7.0 | 35.2 |");
   // PyTorch: the cpu ratio has the target; tiny was not run.
   has(report, "| times faster than PyTorch | cpu, auto, 2 threads | 16.0 x | >= 15 x | met |");
   has(report, "| times faster than PyTorch | tiny, auto, 2 threads | - x |  | not measured |");
