@@ -1,12 +1,14 @@
 #include "indrive/agent/precision_choice.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <map>
 #include <mutex>
 #include <sstream>
 
+#include "indrive/agent/agent.h"
 #include "indrive/nn/tensor.h"
 
 namespace indrive::agent {
@@ -14,14 +16,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr double kBudgetS = 0.1;
+using Clock = std::chrono::steady_clock;
 
-// The forward product (m, k) x (k, n) and its two backward products.
-void add_layer(std::vector<nn::ProductShape>& shapes, std::int64_t m, std::int64_t k,
-               std::int64_t n) {
-  shapes.push_back({m, k, n});  // forward
-  shapes.push_back({m, n, k});  // gradient of the input
-  shapes.push_back({k, m, n});  // gradient of the weights
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
 std::string cpu_model() {
@@ -29,23 +27,61 @@ std::string cpu_model() {
   for (std::string line; std::getline(in, line);) {
     if (line.rfind("model name", 0) == 0) {
       const auto colon = line.find(':');
-      return colon == std::string::npos ? line
-                                        : line.substr(line.find_first_not_of(' ', colon + 1));
+      if (colon == std::string::npos) return line;
+      const auto start = line.find_first_not_of(' ', colon + 1);
+      return start == std::string::npos ? "" : line.substr(start);
     }
   }
   return "unknown CPU";
 }
 
-// What a measurement holds for: the CPU, the thread count and the shapes.
-std::string measurement_key(const std::vector<nn::ProductShape>& shapes) {
+// What a measurement holds for: the CPU, the thread count and the model's sizes and phase.
+std::string measurement_key(const AgentConfig& c) {
+  const WorldModelConfig& w = c.world_model;
   std::ostringstream key;
-  key << cpu_model() << " | threads " << nn::threads() << " | shapes";
-  for (const auto& s : shapes) key << ' ' << s.m << 'x' << s.k << 'x' << s.n;
+  key << cpu_model() << " | threads " << nn::threads() << " | image " << w.image << "x"
+      << w.channels << " cnn " << w.cnn_depth << " deter " << w.deter << " units " << w.units
+      << " latent " << w.stoch << "x" << w.classes << " batch " << c.replay.batch << "x"
+      << c.replay.length << " horizon " << c.behavior.horizon << " " << method_label(c)
+      << " ensemble " << c.intrinsic.ensemble << " " << to_string(c.phase);
   return key.str();
 }
 
-PrecisionChoice measured(const nn::PrecisionRates& rates, std::string source) {
-  return {.precision = nn::choose_precision(rates), .rates = rates, .source = std::move(source)};
+// A replay batch of the config's shape: random class ids and actions, one episode per row.
+SequenceBatch synthetic_batch(const AgentConfig& c) {
+  SequenceBatch b;
+  b.batch = c.replay.batch, b.length = c.replay.length;
+  b.height = b.width = c.world_model.image;
+  const std::size_t n = static_cast<std::size_t>(b.batch) * b.length;
+  b.frames.resize(n * b.height * b.width);
+  std::uint32_t state = 12345;
+  for (auto& f : b.frames)
+    f = static_cast<std::uint8_t>((state = state * 1664525u + 1013904223u) >> 29);
+  b.actions.resize(n);
+  for (auto& a : b.actions)
+    a = static_cast<int>(((state = state * 1664525u + 1013904223u) >> 16) % 9);
+  b.is_first.assign(n, 0.0f), b.is_last.assign(n, 0.0f), b.is_terminal.assign(n, 0.0f);
+  for (int i = 0; i < b.batch; ++i) b.is_first[static_cast<std::size_t>(i) * b.length] = 1.0f;
+  if (c.phase != Phase::kPretrain) b.rewards.assign(n, 0.0f);
+  return b;
+}
+
+// The faster of two timed updates of a throwaway agent in `precision`, after one warm-up update
+// (oneDNN primitives made, bf16 copies kept).
+double update_seconds(const AgentConfig& config, nn::Precision precision) {
+  AgentConfig forced = config;
+  forced.precision = std::string(nn::to_string(precision));
+  Agent agent(forced);
+  const SequenceBatch batch = synthetic_batch(forced);
+  agent.train_step(batch);
+  double best = 0.0;
+  for (int i = 0; i < 2; ++i) {
+    const auto start = Clock::now();
+    agent.train_step(batch);
+    const double s = seconds_since(start);
+    best = i == 0 ? s : std::min(best, s);
+  }
+  return best;
 }
 
 PrecisionChoice forced(const std::string& text) {
@@ -54,18 +90,6 @@ PrecisionChoice forced(const std::string& text) {
   } catch (const nn::PrecisionError& e) {
     throw AgentConfigError(std::string("agent.") + e.what());
   }
-}
-
-// Once per process for each key: agents of one process run in one precision.
-nn::PrecisionRates process_rates(const std::vector<nn::ProductShape>& shapes, bool* fresh) {
-  static std::mutex mutex;
-  static std::map<std::string, nn::PrecisionRates> rates;
-  std::lock_guard<std::mutex> lock(mutex);
-  const std::string key = measurement_key(shapes);
-  const auto it = rates.find(key);
-  *fresh = it == rates.end();
-  if (!*fresh) return it->second;
-  return rates[key] = nn::measure_product_rates(shapes, kBudgetS);
 }
 
 std::map<std::string, std::string> read_fields(const fs::path& file) {
@@ -81,22 +105,10 @@ std::map<std::string, std::string> read_fields(const fs::path& file) {
 
 }  // namespace
 
-std::vector<nn::ProductShape> product_shapes(const AgentConfig& config) {
-  const WorldModelConfig& w = config.world_model;
-  const std::int64_t rows = static_cast<std::int64_t>(config.replay.batch) * config.replay.length;
-  std::vector<nn::ProductShape> shapes;
-  // Encoder: 4x4 convolutions of stride 2; rows are output pixels of every frame.
-  const std::int64_t half = w.image / 2, quarter = w.image / 4;
-  add_layer(shapes, rows * half * half, 16 * w.channels, w.cnn_depth);
-  add_layer(shapes, rows * quarter * quarter, 16 * w.cnn_depth, 2 * w.cnn_depth);
-  // Sequence model over the replay batch: the GRU's three gates and the MLPs into and out of it.
-  add_layer(shapes, rows, w.stoch_dim() + w.units, w.units);
-  add_layer(shapes, rows, w.units + w.deter, 3 * w.deter);
-  add_layer(shapes, rows, w.feat_dim(), w.units);
-  add_layer(shapes, rows, w.units, w.units);
-  // The actor-critic over the imagined states (one start per replay step).
-  add_layer(shapes, rows, w.feat_dim(), w.units);
-  return shapes;
+nn::Precision choose_by_update_time(double fp32_update_s, double bf16_update_s, double margin) {
+  return fp32_update_s > 0.0 && bf16_update_s > 0.0 && fp32_update_s >= margin * bf16_update_s
+             ? nn::Precision::kBf16
+             : nn::Precision::kFp32;
 }
 
 std::string PrecisionChoice::describe() const {
@@ -104,14 +116,14 @@ std::string PrecisionChoice::describe() const {
   if (source == "forced") {
     std::snprintf(text, sizeof text, "precision %s (forced by the config)",
                   std::string(nn::to_string(precision)).c_str());
-  } else if (rates.bf16_gflops <= 0.0) {
+  } else if (bf16_update_s <= 0.0) {
     std::snprintf(text, sizeof text, "precision auto: fp32 (no native bf16 products here)");
   } else {
     std::snprintf(text, sizeof text,
-                  "precision auto: %s (the model's products at %.0f GFLOP/s in bf16 against %.0f "
-                  "in fp32; bf16 needs %.2fx; %s)",
-                  std::string(nn::to_string(precision)).c_str(), rates.bf16_gflops,
-                  rates.fp32_gflops, nn::kBf16Margin, source.c_str());
+                  "precision auto: %s (an update took %.4g s in bf16 against %.4g s in fp32; "
+                  "bf16 needs %.2fx; %s)",
+                  std::string(nn::to_string(precision)).c_str(), bf16_update_s, fp32_update_s,
+                  kBf16Margin, source.c_str());
   }
   return text;
 }
@@ -121,17 +133,35 @@ PrecisionChoice choose_precision(const AgentConfig& config) {
   if (!nn::bf16_supported() || !nn::use_onednn()) {
     return {.precision = nn::Precision::kFp32, .source = "no native bf16"};
   }
-  bool fresh = false;
-  const nn::PrecisionRates rates = process_rates(product_shapes(config), &fresh);
+  // Once per process for each model and thread count: agents of one process run in one
+  // precision. The lock is held while measuring, so a second thread waits for the first.
+  static std::mutex mutex;
+  static std::map<std::string, PrecisionChoice> measured;
+  std::lock_guard<std::mutex> lock(mutex);
+  const std::string key = measurement_key(config);
+  if (const auto it = measured.find(key); it != measured.end()) {
+    PrecisionChoice again = it->second;
+    again.source = "measured earlier in this process";
+    return again;
+  }
+  const nn::Precision before = nn::precision();
+  const auto start = Clock::now();
+  PrecisionChoice choice;
+  choice.fp32_update_s = update_seconds(config, nn::Precision::kFp32);
+  choice.bf16_update_s = update_seconds(config, nn::Precision::kBf16);
+  choice.seconds = seconds_since(start);
+  choice.precision = choose_by_update_time(choice.fp32_update_s, choice.bf16_update_s);
   char source[64];
-  std::snprintf(source, sizeof source, "measured in %.2f s", rates.seconds);
-  return measured(rates, fresh ? source : "measured earlier in this process");
+  std::snprintf(source, sizeof source, "measured in %.1f s", choice.seconds);
+  choice.source = source;
+  nn::set_precision(before);
+  return measured[key] = choice;
 }
 
 PrecisionChoice choose_precision(const AgentConfig& config, const fs::path& run_dir) {
   if (config.precision != "auto") return forced(config.precision);
   const fs::path file = run_dir / "precision.txt";
-  const std::string key = measurement_key(product_shapes(config));
+  const std::string key = measurement_key(config);
   if (fs::exists(file)) {
     auto fields = read_fields(file);
     if (fields["measured_for"] == key &&
@@ -139,10 +169,10 @@ PrecisionChoice choose_precision(const AgentConfig& config, const fs::path& run_
       PrecisionChoice choice{.precision = nn::resolve_precision(fields["chosen"]),
                              .source = "as measured at this run's start, " + file.string()};
       try {
-        choice.rates.fp32_gflops = std::stod(fields["fp32_gflops"]);
-        choice.rates.bf16_gflops = std::stod(fields["bf16_gflops"]);
+        choice.fp32_update_s = std::stod(fields["fp32_update_s"]);
+        choice.bf16_update_s = std::stod(fields["bf16_update_s"]);
       } catch (const std::exception&) {
-        // the choice stands; the rates are only for the log
+        // the choice stands; the times are only for the log
       }
       return choice;
     }
@@ -150,13 +180,13 @@ PrecisionChoice choose_precision(const AgentConfig& config, const fs::path& run_
   PrecisionChoice choice = choose_precision(config);
   fs::create_directories(run_dir);
   std::ofstream out(file);
-  out << "# precision auto: the model's products timed in both precisions at this run's start;\n"
+  out << "# precision auto: the agent's update timed in both precisions at this run's start;\n"
       << "# a restarted learner on the same CPU keeps this choice (delete the file to measure "
          "again)\n"
       << "measured_for=" << key << "\n"
-      << "fp32_gflops=" << choice.rates.fp32_gflops << "\n"
-      << "bf16_gflops=" << choice.rates.bf16_gflops << "\n"
-      << "bf16_margin=" << nn::kBf16Margin << "\n"
+      << "fp32_update_s=" << choice.fp32_update_s << "\n"
+      << "bf16_update_s=" << choice.bf16_update_s << "\n"
+      << "bf16_margin=" << kBf16Margin << "\n"
       << "chosen=" << nn::to_string(choice.precision) << "\n";
   return choice;
 }

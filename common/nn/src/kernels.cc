@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cstring>
 #include <memory>
 #include <string>
@@ -435,62 +434,6 @@ std::string kernel_report() {
   out += one_hot_scan_vectorised() ? "; one-hot inputs scanned with AVX2"
                                    : "; one-hot inputs scanned one column at a time";
   return out;
-}
-
-PrecisionRates measure_product_rates(const std::vector<ProductShape>& shapes, double budget_s) {
-  using Clock = std::chrono::steady_clock;
-  const auto started = Clock::now();
-  PrecisionRates rates;
-  if (shapes.empty()) return rates;
-  const Precision before = g_precision;
-  const bool with_bf16 = bf16_supported() && use_onednn();
-  std::int64_t largest_a = 0, largest_c = 0;
-  double flops = 0.0;
-  std::vector<std::vector<float>> rights;  // one per shape: each is converted once, as a
-  for (const ProductShape& s : shapes) {   // parameter is
-    largest_a = std::max(largest_a, s.m * s.k);
-    largest_c = std::max(largest_c, s.m * s.n);
-    rights.emplace_back(static_cast<std::size_t>(s.k * s.n), 0.25f);
-    flops += 2.0 * static_cast<double>(s.m) * static_cast<double>(s.k) * static_cast<double>(s.n);
-  }
-  std::vector<float> left(static_cast<std::size_t>(largest_a), 0.5f);
-  std::vector<float> out(static_cast<std::size_t>(largest_c));
-  const std::uint64_t version = detail::next_parameter_version();
-  const auto pass = [&](Precision p) {
-    g_precision = p;
-    const auto start = Clock::now();
-    for (std::size_t i = 0; i < shapes.size(); ++i) {
-      const ProductShape& s = shapes[i];
-      detail::gemm(out.data(), {left.data(), s.m, s.k, false, detail::Lifetime::kScratch},
-                   {rights[i].data(), s.k, s.n, false, detail::Lifetime::kVersioned, &version},
-                   false);
-    }
-    return std::chrono::duration<double>(Clock::now() - start).count();
-  };
-  pass(Precision::kFp32);  // warm-up: primitives made, the right operands converted
-  if (with_bf16) pass(Precision::kBf16);
-  double fp32_s = 0.0, bf16_s = 0.0;
-  int passes = 0;
-  const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                           std::chrono::duration<double>(budget_s));
-  do {
-    fp32_s += pass(Precision::kFp32);
-    if (with_bf16) bf16_s += pass(Precision::kBf16);
-    ++passes;
-  } while (Clock::now() < deadline);
-  g_precision = before;
-  // The right operands' kept bf16 copies must not outlive their storage.
-  detail::forget_graph_conversions(/*reset=*/true);
-  rates.fp32_gflops = flops * passes / fp32_s / 1e9;
-  if (with_bf16) rates.bf16_gflops = flops * passes / bf16_s / 1e9;
-  rates.seconds = std::chrono::duration<double>(Clock::now() - started).count();
-  return rates;
-}
-
-Precision choose_precision(const PrecisionRates& rates, double margin) {
-  return rates.bf16_gflops > 0.0 && rates.bf16_gflops >= margin * rates.fp32_gflops
-             ? Precision::kBf16
-             : Precision::kFp32;
 }
 
 bool onednn_available() { return INDRIVE_WITH_ONEDNN != 0; }

@@ -230,9 +230,9 @@ int main(int argc, char** argv) {
                 nn::gather_one_hot() ? "" : " (off: dense products, --one-hot dense)");
     std::printf("product_peak fp32_gflops=%.0f bf16_gflops=%.0f\n", peak_fp32, peak_bf16);
     const indrive::agent::PrecisionChoice& choice = agent.precision_choice();
-    std::printf("precision_choice chosen=%s fp32_gflops=%.0f bf16_gflops=%.0f (%s)\n",
-                std::string(nn::to_string(choice.precision)).c_str(), choice.rates.fp32_gflops,
-                choice.rates.bf16_gflops, choice.describe().c_str());
+    std::printf("precision_choice chosen=%s fp32_update_s=%.4f bf16_update_s=%.4f (%s)\n",
+                std::string(nn::to_string(choice.precision)).c_str(), choice.fp32_update_s,
+                choice.bf16_update_s, choice.describe().c_str());
     const SequenceBatch batch = random_batch(config, 1);
     const double frames = static_cast<double>(batch.batch) * batch.length;
 

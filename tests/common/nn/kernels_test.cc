@@ -197,37 +197,6 @@ TEST_F(KernelsTest, CountsTwoFlopsPerMultiplyAdd) {
   EXPECT_EQ(gemm_flops() - before, 2u * 20 * 40 * 30);
 }
 
-// The rule of precision auto, stated before any measurement: bf16 only at least 1.10x fp32.
-TEST(PrecisionChoiceRule, Bf16OnlyWhereItWasMeasuredClearlyFaster) {
-  EXPECT_EQ(choose_precision({.fp32_gflops = 362, .bf16_gflops = 621}), Precision::kBf16);
-  EXPECT_EQ(choose_precision({.fp32_gflops = 300, .bf16_gflops = 150}), Precision::kFp32);
-  EXPECT_EQ(choose_precision({.fp32_gflops = 300, .bf16_gflops = 320}), Precision::kFp32)
-      << "7% faster is within the noise of a 0.1 s measurement";
-  EXPECT_EQ(choose_precision({.fp32_gflops = 300, .bf16_gflops = 330}), Precision::kBf16);
-  EXPECT_EQ(choose_precision({.fp32_gflops = 300, .bf16_gflops = 0}), Precision::kFp32)
-      << "bf16 not measured";
-  EXPECT_EQ(choose_precision({.fp32_gflops = 300, .bf16_gflops = 400}, 1.5), Precision::kFp32);
-}
-
-TEST_F(KernelsTest, MeasuringProductRatesTimesBothPrecisionsAndLeavesNoTrace) {
-  set_precision(Precision::kFp32);
-  const std::vector<ProductShape> shapes = {{256, 128, 96}, {96, 256, 128}, {512, 64, 64}};
-  const PrecisionRates rates = measure_product_rates(shapes, 0.05);
-  EXPECT_GT(rates.fp32_gflops, 0.0);
-  EXPECT_EQ(rates.bf16_gflops > 0.0, bf16_supported() && use_onednn()) << kernel_report();
-  EXPECT_GE(rates.seconds, 0.05);
-  EXPECT_LT(rates.seconds, 30.0);
-  EXPECT_EQ(precision(), Precision::kFp32) << "the precision is left as it was";
-  std::printf("[figures] products of the test's shapes: fp32 %.1f GFLOP/s, bf16 %.1f GFLOP/s\n",
-              rates.fp32_gflops, rates.bf16_gflops);
-  // Products after it are exact again: no bf16 copy of the measurement's buffers is reused.
-  const std::vector<float> a(20 * 30, 1.0f), b(30 * 10, 2.0f);
-  std::vector<float> c(20 * 10);
-  detail::gemm(c.data(), {a.data(), 20, 30, false}, {b.data(), 30, 10, false}, false);
-  for (float v : c) ASSERT_EQ(v, 60.0f);
-  EXPECT_EQ(measure_product_rates({}, 0.05).fp32_gflops, 0.0) << "nothing to measure";
-}
-
 TEST_F(KernelsTest, PrecisionTextsAndTheirErrors) {
   EXPECT_EQ(resolve_precision("fp32"), Precision::kFp32);
   EXPECT_EQ(resolve_precision("auto"), bf16_supported() ? Precision::kBf16 : Precision::kFp32);

@@ -140,7 +140,7 @@ struct AgentConfig {
   // the task actor); false takes the most likely action.
   bool eval_sample = true;
   // Operands of the matrix products: "auto" (bf16 where the CPU multiplies it natively, AMX or
-  // AVX512_BF16, and the model's products measure faster in it; else fp32; precision_choice.h),
+  // AVX512_BF16, and the agent's update measures faster in it; else fp32; precision_choice.h),
   // "fp32" or "bf16". Parameters, optimiser state and every other op
   // stay fp32 (nn/kernels.h). Process-wide: an Agent applies it when it is made.
   std::string precision = "auto";

@@ -17,7 +17,6 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
-#include <vector>
 
 namespace indrive::nn {
 
@@ -45,33 +44,14 @@ void set_one_hot_scan_vectorised(bool allowed);
 void set_gather_one_hot(bool on);
 bool gather_one_hot();
 
-// "fp32" and "bf16" as such; "auto" is bf16 where bf16_supported(), else fp32 (the agent
-// measures instead: measure_product_rates, choose_precision). Throws
+// "fp32" and "bf16" as such; "auto" is bf16 where bf16_supported(), else fp32 (the agent times
+// its own update in both instead: agent/precision_choice.h). Throws
 // PrecisionError for any other text, and for "bf16" on a CPU without native bf16, saying what
 // to set instead.
 Precision resolve_precision(std::string_view text);
 
 void set_precision(Precision p);
 Precision precision();
-
-// Choosing the precision by measurement ("auto"): a CPU flag says whether bf16 products run,
-// not whether they are faster. Some CPUs with AVX512_BF16 multiply bf16 at half their fp32 rate.
-struct ProductShape {
-  std::int64_t m, k, n;  // (m, k) x (k, n)
-};
-struct PrecisionRates {
-  double fp32_gflops = 0.0;
-  double bf16_gflops = 0.0;  // 0: not measured (no native bf16, or products on Eigen)
-  double seconds = 0.0;      // the measurement's wall time
-};
-// Times `shapes` (a model's own products) in fp32 and, where bf16_supported() and the products
-// run on oneDNN, in bf16, alternating passes for about `budget_s` after one warm-up pass each.
-// The left operand is converted to bf16 for every product (as an activation is at least once),
-// the right one once (as a parameter is once per update). Leaves the precision as it was.
-PrecisionRates measure_product_rates(const std::vector<ProductShape>& shapes, double budget_s);
-// The rule: bf16 only where it was measured at least `margin` times as fast as fp32.
-constexpr double kBf16Margin = 1.10;
-Precision choose_precision(const PrecisionRates& rates, double margin = kBf16Margin);
 
 // One line for the log: the kernel library and its version, the CPU ISA it runs, and the
 // precision of the products and the one-hot scan, e.g. "kernels: oneDNN 2.6.3 on
