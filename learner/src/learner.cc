@@ -78,6 +78,7 @@ struct Learner::Impl {
     config.config().write_yaml(run.config_path());
 
     resume();
+    config.note_agent_precision(*agent, "learner");
     // A final snapshot file left by an earlier end of this run (one resumed with a larger
     // budget) is not this run's end: evaluators must not take it.
     std::error_code removed_error;

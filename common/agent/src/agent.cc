@@ -116,8 +116,9 @@ TrainMetrics StepTiming::as_metrics() const {
 
 Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   validate(config_);
-  precision_ = choose_precision(config_);
-  nn::set_precision(precision_.precision);
+  const std::optional<PrecisionChoice> known = known_precision(config_);
+  // Until it is measured (below), an "auto" agent is built in fp32 (building runs no product).
+  nn::set_precision(known ? known->precision : nn::Precision::kFp32);
   nn::flush_denormals();
   wm_ = std::make_unique<WorldModel>(config_.world_model, rng_);
   intrinsic_ = make_intrinsic(config_.intrinsic, config_.world_model, rng_);
@@ -133,6 +134,8 @@ Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   cont_opt_ = std::make_unique<nn::Adam>(
       wm_->params(), nn::AdamConfig{.lr = w.lr, .eps = w.eps, .clip = w.clip}, "cont.");
   if (config_.phase == Phase::kFinetune) set_phase(Phase::kFinetune);
+  precision_ = known ? *known : measure_precision(*this);
+  nn::set_precision(precision_.precision);
 }
 
 void Agent::set_phase(Phase phase) {

@@ -66,13 +66,10 @@ SequenceBatch synthetic_batch(const AgentConfig& c) {
   return b;
 }
 
-// The faster of two timed updates of a throwaway agent in `precision`, after one warm-up update
-// (oneDNN primitives made, bf16 copies kept).
-double update_seconds(const AgentConfig& config, nn::Precision precision) {
-  AgentConfig forced = config;
-  forced.precision = std::string(nn::to_string(precision));
-  Agent agent(forced);
-  const SequenceBatch batch = synthetic_batch(forced);
+// The faster of two timed updates of `agent` in `precision`, after one warm-up update (oneDNN
+// primitives made, bf16 copies kept).
+double update_seconds(Agent& agent, const SequenceBatch& batch, nn::Precision precision) {
+  nn::set_precision(precision);
   agent.train_step(batch);
   double best = 0.0;
   for (int i = 0; i < 2; ++i) {
@@ -83,6 +80,10 @@ double update_seconds(const AgentConfig& config, nn::Precision precision) {
   }
   return best;
 }
+
+// The choices measured in this process, by measurement_key.
+std::mutex g_mutex;
+std::map<std::string, PrecisionChoice> g_measured;
 
 PrecisionChoice forced(const std::string& text) {
   try {
@@ -128,43 +129,47 @@ std::string PrecisionChoice::describe() const {
   return text;
 }
 
-PrecisionChoice choose_precision(const AgentConfig& config) {
+std::optional<PrecisionChoice> known_precision(const AgentConfig& config) {
   if (config.precision != "auto") return forced(config.precision);
   if (!nn::bf16_supported() || !nn::use_onednn()) {
-    return {.precision = nn::Precision::kFp32, .source = "no native bf16"};
+    return PrecisionChoice{.precision = nn::Precision::kFp32, .source = "no native bf16"};
   }
-  // Once per process for each model and thread count: agents of one process run in one
-  // precision. The lock is held while measuring, so a second thread waits for the first.
-  static std::mutex mutex;
-  static std::map<std::string, PrecisionChoice> measured;
-  std::lock_guard<std::mutex> lock(mutex);
-  const std::string key = measurement_key(config);
-  if (const auto it = measured.find(key); it != measured.end()) {
-    PrecisionChoice again = it->second;
-    again.source = "measured earlier in this process";
-    return again;
-  }
-  const nn::Precision before = nn::precision();
+  std::lock_guard<std::mutex> lock(g_mutex);
+  const auto it = g_measured.find(measurement_key(config));
+  if (it == g_measured.end()) return std::nullopt;
+  PrecisionChoice again = it->second;
+  again.source = "measured earlier in this process";
+  return again;
+}
+
+PrecisionChoice measure_precision(Agent& agent) {
+  const AgentConfig& config = agent.config();
   const auto start = Clock::now();
+  const std::vector<std::uint8_t> before = agent.checkpoint_bytes();
+  const SequenceBatch batch = synthetic_batch(config);
   PrecisionChoice choice;
-  choice.fp32_update_s = update_seconds(config, nn::Precision::kFp32);
-  choice.bf16_update_s = update_seconds(config, nn::Precision::kBf16);
-  choice.seconds = seconds_since(start);
+  choice.fp32_update_s = update_seconds(agent, batch, nn::Precision::kFp32);
+  choice.bf16_update_s = update_seconds(agent, batch, nn::Precision::kBf16);
+  agent.load_checkpoint(before, "the agent before its precision measurement");
+  // The arena and the kept bf16 copies start afresh, as in an agent that never measured: kept,
+  // the measurement's layout made the next updates 16% slower on `cpu`.
+  nn::current_graph().release_memory();
+  nn::detail::forget_graph_conversions(/*reset=*/true);
   choice.precision = choose_by_update_time(choice.fp32_update_s, choice.bf16_update_s);
+  choice.seconds = seconds_since(start);
   char source[64];
   std::snprintf(source, sizeof source, "measured in %.1f s", choice.seconds);
   choice.source = source;
-  nn::set_precision(before);
-  return measured[key] = choice;
+  std::lock_guard<std::mutex> lock(g_mutex);
+  g_measured[measurement_key(config)] = choice;
+  return choice;
 }
 
-PrecisionChoice choose_precision(const AgentConfig& config, const fs::path& run_dir) {
-  if (config.precision != "auto") return forced(config.precision);
+std::optional<PrecisionChoice> run_precision(const AgentConfig& config, const fs::path& run_dir) {
   const fs::path file = run_dir / "precision.txt";
-  const std::string key = measurement_key(config);
-  if (fs::exists(file)) {
+  if (config.precision == "auto" && fs::exists(file)) {
     auto fields = read_fields(file);
-    if (fields["measured_for"] == key &&
+    if (fields["measured_for"] == measurement_key(config) &&
         (fields["chosen"] == "fp32" || (fields["chosen"] == "bf16" && nn::bf16_supported()))) {
       PrecisionChoice choice{.precision = nn::resolve_precision(fields["chosen"]),
                              .source = "as measured at this run's start, " + file.string()};
@@ -177,18 +182,24 @@ PrecisionChoice choose_precision(const AgentConfig& config, const fs::path& run_
       return choice;
     }
   }
-  PrecisionChoice choice = choose_precision(config);
+  return known_precision(config);
+}
+
+void record_run_precision(const AgentConfig& config, const PrecisionChoice& choice,
+                          const fs::path& run_dir) {
+  if (choice.bf16_update_s <= 0.0 || choice.source.rfind("as measured at this run", 0) == 0) {
+    return;  // nothing measured, or read from this file
+  }
   fs::create_directories(run_dir);
-  std::ofstream out(file);
+  std::ofstream out(run_dir / "precision.txt");
   out << "# precision auto: the agent's update timed in both precisions at this run's start;\n"
       << "# a restarted learner on the same CPU keeps this choice (delete the file to measure "
          "again)\n"
-      << "measured_for=" << key << "\n"
+      << "measured_for=" << measurement_key(config) << "\n"
       << "fp32_update_s=" << choice.fp32_update_s << "\n"
       << "bf16_update_s=" << choice.bf16_update_s << "\n"
       << "bf16_margin=" << kBf16Margin << "\n"
       << "chosen=" << nn::to_string(choice.precision) << "\n";
-  return choice;
 }
 
 }  // namespace indrive::agent

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <set>
 
+#include "indrive/agent/agent.h"
 #include "indrive/agent/precision_choice.h"
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
@@ -285,10 +286,18 @@ agent::AgentConfig ServiceConfig::agent() const {
 
 agent::AgentConfig ServiceConfig::training_agent(const char* log_tag) const {
   agent::AgentConfig config = agent();
-  const agent::PrecisionChoice choice = agent::choose_precision(config, run_dir());
-  config.precision = std::string(nn::to_string(choice.precision));
-  INDRIVE_LOG(kInfo, log_tag) << choice.describe();
+  if (const auto known = agent::run_precision(config, run_dir())) {
+    config.precision = std::string(nn::to_string(known->precision));
+    INDRIVE_LOG(kInfo, log_tag) << known->describe();
+  }
   return config;
+}
+
+void ServiceConfig::note_agent_precision(const agent::Agent& agent, const char* log_tag) const {
+  const agent::PrecisionChoice& choice = agent.precision_choice();
+  if (choice.source.rfind("measured in", 0) != 0) return;  // training_agent logged it
+  INDRIVE_LOG(kInfo, log_tag) << choice.describe();
+  agent::record_run_precision(agent.config(), choice, run_dir());
 }
 
 std::map<std::string, std::string> ServiceConfig::agent_choices() const {

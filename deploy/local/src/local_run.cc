@@ -153,6 +153,7 @@ struct LocalRun::Impl {
     checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
     c.write_yaml(run.config_path());
     INDRIVE_LOG(kInfo, "local") << nn::kernel_report();
+    service.note_agent_precision(trainer.agent(), "local");
     resume();
   }
 

@@ -1,17 +1,17 @@
 // Which precision the agent's matrix products run in. "fp32" and "bf16" are forced; "auto"
-// times the agent's own update in both precisions (a throwaway agent of the same config, on a
-// synthetic batch, one warm-up and two timed updates each) and takes bf16 only where it is at
+// times the agent's own update in both precisions (on a synthetic batch, one warm-up and two
+// timed updates each, the agent restored bitwise afterwards) and takes bf16 only where it is at
 // least kBf16Margin times as fast. A CPU flag says whether bf16 products run, not whether they
 // are faster: a 2-core Xeon with AVX512_BF16 multiplied bf16 at half its fp32 rate, and the
 // products timed alone mispredicted the update on an AMD EPYC (they leave out that an update
 // reuses each bf16 copy).
 //
-//   const PrecisionChoice choice = choose_precision(config, run_dir);  // measured once per run
-//   config.precision = std::string(nn::to_string(choice.precision));
-//   INDRIVE_LOG(kInfo, "learner") << choice.describe();
+//   Agent agent(config);   // "auto": the agent times its own update, then restores itself
+//   INDRIVE_LOG(kInfo, "learner") << agent.precision_choice().describe();
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "indrive/agent/agent_config.h"
@@ -42,16 +42,28 @@ struct PrecisionChoice {
 nn::Precision choose_by_update_time(double fp32_update_s, double bf16_update_s,
                                     double margin = kBf16Margin);
 
-// config.precision resolved. "bf16" on a CPU without native bf16 throws AgentConfigError, as
-// nn::resolve_precision does. "auto" is measured once per process for each model and thread
-// count, so agents of one process agree. It takes about 6 updates of the model: 0.3 s on
-// `tiny`, 10 s on `cpu`, a minute on `small`.
-PrecisionChoice choose_precision(const AgentConfig& config);
+class Agent;
 
-// As above, but "auto" is measured once per run: the first call writes
-// <run_dir>/precision.txt, and later calls (a restarted or resumed learner) take its choice when
-// it was measured on this CPU model with this thread count and this model; otherwise they
-// measure again and rewrite it.
-PrecisionChoice choose_precision(const AgentConfig& config, const std::filesystem::path& run_dir);
+// config.precision resolved where no measurement is needed: forced, no native bf16, or "auto"
+// already measured in this process for this model and thread count (so agents of one process
+// agree). nullopt: "auto" still to be measured, by the agent itself (measure_precision).
+// "bf16" on a CPU without native bf16 throws AgentConfigError, as nn::resolve_precision does.
+std::optional<PrecisionChoice> known_precision(const AgentConfig& config);
+
+// Times `agent`'s own update in both precisions (one warm-up and two timed updates each, on a
+// synthetic batch of its config's shape), then restores the agent bitwise from the bytes it had
+// (checkpoint_bytes), chooses by choose_by_update_time and records the choice for the process.
+// About 6 updates: 0.3 s on `tiny`, 10 s on `cpu`, a minute on `small`. Timing the agent
+// itself matters: a second agent made after throwaway ones ran its update 5-15% slower.
+PrecisionChoice measure_precision(Agent& agent);
+
+// For a run: the choice kept in <run_dir>/precision.txt when it was measured on this CPU model
+// with this thread count and this model (a restarted or resumed learner), else
+// known_precision(config).
+std::optional<PrecisionChoice> run_precision(const AgentConfig& config,
+                                             const std::filesystem::path& run_dir);
+// Writes `choice` (a measured one) to <run_dir>/precision.txt for run_precision to find.
+void record_run_precision(const AgentConfig& config, const PrecisionChoice& choice,
+                          const std::filesystem::path& run_dir);
 
 }  // namespace indrive::agent

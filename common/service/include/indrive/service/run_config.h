@@ -21,6 +21,10 @@
 #include "indrive/dds/participant.h"
 #include "indrive/msg/trajectory.h"
 
+namespace indrive::agent {
+class Agent;
+}  // namespace indrive::agent
+
 namespace indrive::service {
 
 // What both executables read from their command line (fixed by `indrive launch`).
@@ -64,10 +68,13 @@ class ServiceConfig {
 
   // The agent's configuration (preset sizes plus every agent.* key).
   agent::AgentConfig agent() const;
-  // agent() for the process that trains it: precision "auto" settled once per run by measuring
-  // the model's products (agent::choose_precision; <run>/precision.txt keeps the choice for a
-  // restarted learner) and logged under `log_tag`.
+  // agent() for the process that trains it: precision "auto" settled where it is known (this
+  // run's <run>/precision.txt from a measurement on this CPU, or a measurement earlier in this
+  // process; logged under `log_tag`), else left "auto" for the agent to measure itself.
   agent::AgentConfig training_agent(const char* log_tag) const;
+  // Once the training agent is made: logs what its "auto" measured and keeps it in
+  // <run>/precision.txt, so that a restarted learner trains on in the same precision.
+  void note_agent_precision(const agent::Agent& agent, const char* log_tag) const;
   // The agent keys this configuration chose (a preset, a config file, --set), each with where
   // it was chosen: "preset" -> "--set preset=tiny", "world_model.deter" -> "preset 'tiny'" or
   // "--set agent.world_model.deter=64". Keys left at the defaults are not in it.
