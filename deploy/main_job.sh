@@ -19,7 +19,7 @@ run_id=${INDRIVE_RUN_ID:-smoke-$(date +%Y%m%d-%H%M%S)}
 run="$runs/$run_id"
 shipped_snapshot="$root/docs/results/route-sets/snapshots/s0-pretrain-disag.params"
 shipped="$run/shipped-policy"
-shipped_episodes=${INDRIVE_SHIPPED_EPISODES:-5}
+shipped_episodes=${INDRIVE_SHIPPED_EPISODES:-10}
 
 say() { printf '\033[1m[main]\033[0m %s\n' "$*"; }
 started=$(date +%s)
