@@ -175,7 +175,6 @@ void ProcessWatch::open() {
     std::lock_guard<std::mutex> lock(mutex_);
     heartbeats_[{static_cast<std::uint32_t>(beat.role()), beat.id()}] = seen;
   });
-  chunk_writer_ = participant_->make_writer<msg::TrajectoryChunk>();
   opened_s_ = now_s();  // when it is ready: making a participant takes a while
 }
 

@@ -102,9 +102,13 @@ class ProcessWatch {
   // actor's newest chunk and each process's newest heartbeat, with their times.
   std::string describe();
   dds::Participant& participant() { return *participant_; }
-  // A writer of trajectory chunks on the current participant, made anew with it: take it again
-  // after every call that may replace the participant.
-  dds::Writer<msg::TrajectoryChunk>& chunk_writer() { return *chunk_writer_; }
+  // A writer of trajectory chunks on the current participant, made at the first call after each
+  // (re)opening (with DDS Security an observer may not publish, so only tests that write make
+  // one): take it again after every call that may replace the participant.
+  dds::Writer<msg::TrajectoryChunk>& chunk_writer() {
+    if (!chunk_writer_) chunk_writer_ = participant_->make_writer<msg::TrajectoryChunk>();
+    return *chunk_writer_;
+  }
   // With DDS Security, a handshake of this watch's participant pending for
   // dds::Participant::kHandshakeStallS never completes (seen in the two-host security test on
   // 2026-12-05: the watch never authenticated one actor, so none of its chunks arrived), where a

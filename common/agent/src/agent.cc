@@ -136,6 +136,7 @@ Agent::Agent(const AgentConfig& config) : config_(config), rng_(config.seed) {
   if (config_.phase == Phase::kFinetune) set_phase(Phase::kFinetune);
   precision_ = known ? *known : measure_precision(*this);
   nn::set_precision(precision_.precision);
+  timing_ = {}, flops_ = {};  // the measurement's updates are no update of this agent
 }
 
 void Agent::set_phase(Phase phase) {
