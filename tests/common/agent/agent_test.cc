@@ -23,6 +23,9 @@ AgentConfig tiny_config(Phase phase = Phase::kPretrain, Method method = Method::
   c.intrinsic.method = method;
   c.behavior.horizon = 5;  // short rollouts keep the unit tests fast
   c.seed = 17;
+  // The tests compare agents bitwise (across thread counts, resumes, phases): "auto" could
+  // measure bf16 faster for one of them and not for another.
+  c.precision = "fp32";
   return c;
 }
 

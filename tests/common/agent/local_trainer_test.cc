@@ -33,6 +33,7 @@ AgentConfig loop_config(Phase phase) {
   c.replay.prefill = 40;
   c.behavior.horizon = 5;
   c.seed = 3;
+  c.precision = "fp32";  // resumes are compared bitwise; "auto" may measure each differently
   return c;
 }
 
