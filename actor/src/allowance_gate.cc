@@ -37,6 +37,7 @@ void AllowanceGate::on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::u
   last_heard_ = Clock::now();
   received_ = heartbeat.env_steps();
   own_at_heartbeat_ = own_steps;
+  have_received_ = true;
   arrived();
 }
 
@@ -47,7 +48,9 @@ void AllowanceGate::wake() {
 
 bool AllowanceGate::may_step(std::uint64_t own_steps) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!have_allowance_) return false;
+  // Both are needed: the allowance is a total over the run, and only the learner's heartbeat
+  // says how much of it is spent (a resumed learner has spent some before any actor steps).
+  if (!have_allowance_ || !have_received_) return false;
   const std::uint64_t estimate = received_ + (own_steps - std::min(own_steps, own_at_heartbeat_));
   return estimate < allowed_;
 }

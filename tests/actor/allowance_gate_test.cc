@@ -36,6 +36,8 @@ TEST(AllowanceGateTest, StepsUpToTheAllowanceCountingOwnStepsSinceTheHeartbeat) 
   AllowanceGate gate("run-a");
   EXPECT_FALSE(gate.may_step(0)) << "no step before the learner has paced the run";
   gate.on_allowance(allowance(100));
+  EXPECT_FALSE(gate.may_step(0)) << "how much of the allowance is spent comes with a heartbeat";
+  gate.on_learner_heartbeat(learner_heartbeat(0), 0);
   EXPECT_TRUE(gate.may_step(0));
   EXPECT_TRUE(gate.may_step(99));
   EXPECT_FALSE(gate.may_step(100));
@@ -44,6 +46,19 @@ TEST(AllowanceGateTest, StepsUpToTheAllowanceCountingOwnStepsSinceTheHeartbeat) 
   gate.on_learner_heartbeat(learner_heartbeat(90), 95);
   EXPECT_TRUE(gate.may_step(104));
   EXPECT_FALSE(gate.may_step(105));
+}
+
+// An actor that joins a resumed learner (or replaces one mid-run) starts with 0 steps of its
+// own while the learner has received many: it waits for the heartbeat that says how many, not
+// stepping up to the whole allowance alone (a service job resumed under Slurm overshot its
+// 1,100-step budget by 900 steps that way).
+TEST(AllowanceGateTest, AJoiningActorWaitsForTheLearnersCountOfWhatItReceived) {
+  AllowanceGate gate("run-a");
+  gate.on_allowance(allowance(1100, "run-a", 2));
+  EXPECT_FALSE(gate.may_step(0));
+  gate.on_learner_heartbeat(learner_heartbeat(1090), 0);
+  EXPECT_TRUE(gate.may_step(9));
+  EXPECT_FALSE(gate.may_step(10));
 }
 
 TEST(AllowanceGateTest, ForeignAndNonLearnerMessagesNeitherPaceNorWake) {
@@ -70,6 +85,7 @@ TEST(AllowanceGateTest, EveryAcceptedMessageAndWakeCountsAsNews) {
 // not wake it.
 TEST(AllowanceGateTest, AnAllowanceArrivingOnAnotherThreadWakesTheWaiter) {
   AllowanceGate gate("run-a");
+  gate.on_learner_heartbeat(learner_heartbeat(0), 0);
   const std::uint64_t seen = gate.news();
   ASSERT_FALSE(gate.may_step(0));
   std::thread learner([&] {

@@ -43,7 +43,8 @@ class AllowanceGate {
   // Something else a waiting actor acts on arrived (a snapshot or its announcement).
   void wake();
 
-  // True when one more step of this actor stays within the allowance.
+  // True when one more step of this actor stays within the allowance; false until both an
+  // allowance and a learner heartbeat have arrived.
   bool may_step(std::uint64_t own_steps) const;
   // Seconds since the last allowance or learner heartbeat of this run (since construction when
   // none came yet).
@@ -62,6 +63,7 @@ class AllowanceGate {
   mutable std::mutex mutex_;
   mutable std::condition_variable news_arrived_;
   bool have_allowance_ = false;
+  bool have_received_ = false;  // a learner heartbeat of this run arrived
   std::uint64_t allowed_ = 0;
   std::uint64_t epoch_ = 0;
   std::uint64_t received_ = 0;
