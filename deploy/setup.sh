@@ -34,7 +34,8 @@ packages=(
 # The test command also builds and briefly runs the fuzz targets (tests/fuzz/README.md):
 # clang's libFuzzer and sanitizer runtimes, and its OpenMP.
 # The dashboard's browser test opens a real page in headless Chromium.
-test_packages=(clang libclang-rt-14-dev libomp-14-dev chromium)
+# The cluster test runs a real two-node Slurm (tests/deploy/slurm/).
+test_packages=(clang libclang-rt-14-dev libomp-14-dev chromium slurm-wlm munge)
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 

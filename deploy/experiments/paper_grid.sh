@@ -22,6 +22,10 @@
 #   deploy/experiments/paper_grid.sh chain --seed 0 --method disag     # pretrain, zero/few-shot
 #   deploy/experiments/paper_grid.sh chain --seed 0 --method random    # its episodes, zero-shot
 #   deploy/experiments/paper_grid.sh dreamer --seed 0 --task lane_following
+#   deploy/experiments/paper_grid.sh grid --seeds "0 1 2" --methods "disag icm rnd random" \
+#       --dreamer-tasks "lane_following collision_avoidance" [--slurm [--sbatch OPTION ...]]
+#             # every chain's stages and the report: here in order, or as Slurm jobs that
+#             # follow one another (docs/operations.md, "On a Slurm cluster")
 #   deploy/experiments/paper_grid.sh summary   # the pretraining measures, a markdown table
 #   deploy/experiments/paper_grid.sh report
 #   deploy/experiments/paper_grid.sh publish --page docs/results/method-fewshot512
@@ -43,6 +47,9 @@
 # training, linked into this one, to evaluate the same policies on another --route-set:
 #   paper_grid.sh chain --out runs/grid-left --trained-in runs/grid --route-set left \
 #       --seed 0 --method disag --stages "zeroshot fewshot"
+# grid: --seeds "S ..." and --methods "M ..." (the cells; --seed and --method by default),
+# --dreamer-tasks "T ..." (none by default), --stages as a chain's, --slurm (submit with sbatch),
+# --sbatch OPTION (repeatable, e.g. --sbatch --partition=cpu); the other options go to every stage.
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -65,14 +72,22 @@ snapshot_seeds=0
 trained_in=""
 towns=ours
 code_budget=30000
+seeds=""
+methods=""
+dreamer_tasks=""
+scheduler=local
+sbatch_args=()
+forward=()  # the options every stage of a grid passes on to its chain, dreamer or report call
 
-usage() { sed -n '2,45p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//'; }
 [[ $# -ge 1 ]] || { usage; exit 2; }
 [[ $1 == -h || $1 == --help ]] && { usage; exit 0; }
 command=$1
 shift
 while [[ $# -gt 0 ]]; do
   case "$1" in
+    --bin | --out | --preset | --pretrain-steps | --task-steps | --fewshot-ratio | --episodes | \
+      --route-set | --set | --towns | --code-budget) forward+=("$1" "$2") ;;&
     --bin) bin=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --preset) preset=$2; shift 2 ;;
@@ -91,6 +106,11 @@ while [[ $# -gt 0 ]]; do
     --trained-in) trained_in=$2; shift 2 ;;
     --towns) towns=$2; shift 2 ;;
     --code-budget) code_budget=$2; shift 2 ;;
+    --seeds) seeds=$2; shift 2 ;;
+    --methods) methods=$2; shift 2 ;;
+    --dreamer-tasks) dreamer_tasks=$2; shift 2 ;;
+    --slurm) scheduler=slurm; shift ;;
+    --sbatch) sbatch_args+=("$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -233,6 +253,95 @@ case $command in
     train "$d" "$(config_of dreamer "$task")" "$total" ${task_routes[@]+"${task_routes[@]}"}
     evaluate "$seed_dir/fewshot-$(short "$task")-dreamer" few_shot "$d/snapshot.params" \
       --set "agent.phase=dreamer" --set "agent.task=$task"
+    ;;
+  grid)
+    # Every stage of every (seed, method) chain, DreamerV3 on each of --dreamer-tasks, then the
+    # report: here, one after another (a failed stage stops the grid; run it again to go on), or
+    # with --slurm each as its own Slurm job, a stage after the one it starts from
+    # (--dependency=afterok) and the report after all (afterany). A stage whose DONE files
+    # exist is not run or submitted, so a second call completes a partial grid.
+    self="$root/deploy/experiments/paper_grid.sh"
+    seeds=${seeds:-$seed}
+    methods=${methods:-$method}
+    for m in $methods; do
+      case $m in disag|icm|rnd|random) ;; *)
+        echo "--methods takes disag, icm, rnd and random, got '$m'" >&2; exit 2 ;;
+      esac
+    done
+    for s in $seeds; do
+      [[ $s =~ ^[0-9]+$ ]] || { echo "--seeds takes seed numbers, got '$s'" >&2; exit 2; }
+    done
+    for t in $dreamer_tasks; do
+      case $t in lane_following|collision_avoidance) ;; *)
+        echo "--dreamer-tasks takes lane_following and collision_avoidance, got '$t'" >&2; exit 2 ;;
+      esac
+    done
+    if [[ $scheduler == slurm ]]; then
+      command -v sbatch > /dev/null || { echo "--slurm: no sbatch here; submit from a node of the cluster (or leave --slurm out to run the grid here)" >&2; exit 1; }
+      mkdir -p "$out/slurm"
+    fi
+    finished() { # evaluation or run directories, all with their DONE (evaluations on the CARLA towns: both protocols')
+      local d
+      for d in "$@"; do
+        done_mark "$d" || return 1
+        if [[ $towns == carla && $(basename "$d") == @(zeroshot|fewshot)-* ]]; then done_mark "$d-code" || return 1; fi
+      done
+    }
+    job_ids=()
+    job=""  # the id of the stage run() last submitted, empty when it ran here or was done
+    run() { # name cpus after-job marker-dirs -- this script's arguments
+      local name=$1 cpus=$2 after=$3
+      shift 3
+      local markers=()
+      while [[ $1 != -- ]]; do markers+=("$1"); shift; done
+      shift
+      job=""
+      if finished "${markers[@]}"; then say "$name: done already"; return; fi
+      if [[ $scheduler == local ]]; then
+        bash "$self" "$@" "${forward[@]}"
+        return
+      fi
+      local dependency=()
+      [[ -n $after ]] && dependency=(--dependency="afterok:$after" --kill-on-invalid-dep=yes)
+      job=$(sbatch --parsable --job-name="indrive-$name" --output="$out/slurm/$name-%j.out" \
+        --ntasks=1 --cpus-per-task="$cpus" ${dependency[@]+"${dependency[@]}"} \
+        ${sbatch_args[@]+"${sbatch_args[@]}"} --wrap="$(printf '%q ' bash "$self" "$@" "${forward[@]}")")
+      job=${job%%;*}
+      job_ids+=("$job")
+      say "$name: job $job${after:+ after $after}"
+    }
+    # Training runs one process (OMP_NUM_THREADS, 1 unless set); an evaluation runs two.
+    for s in $seeds; do
+      for m in $methods; do
+        sd="$out/s$s"
+        run "s$s-$m-pretrain" 1 "" "$sd/pretrain-$m" -- chain --seed "$s" --method "$m" --stages pretrain
+        pretrain_job=$job
+        if has_stage zeroshot; then
+          run "s$s-$m-zeroshot" 2 "$pretrain_job" "$sd/zeroshot-$m" -- \
+            chain --seed "$s" --method "$m" --stages zeroshot
+        fi
+        if has_stage fewshot && [[ $m != random ]]; then
+          for t in $tasks; do
+            run "s$s-$m-fewshot-$(short "$t")" 2 "$pretrain_job" "$sd/finetune-$(short "$t")-$m" \
+              "$sd/fewshot-$(short "$t")-$m" -- chain --seed "$s" --method "$m" --stages fewshot --task "$t"
+          done
+        fi
+      done
+      for t in $dreamer_tasks; do
+        run "s$s-dreamer-$(short "$t")" 2 "" "$out/s$s/fewshot-$(short "$t")-dreamer" -- \
+          dreamer --seed "$s" --task "$t"
+      done
+    done
+    if [[ $scheduler == local ]]; then
+      bash "$self" report "${forward[@]}"
+    elif [[ ${#job_ids[@]} -gt 0 ]]; then
+      report=$(sbatch --parsable --job-name=indrive-grid-report --output="$out/slurm/report-%j.out" \
+        --ntasks=1 --dependency="afterany:$(IFS=:; echo "${job_ids[*]}")" \
+        ${sbatch_args[@]+"${sbatch_args[@]}"} --wrap="$(printf '%q ' bash "$self" report "${forward[@]}")")
+      say "report: job ${report%%;*} after all ${#job_ids[@]}; logs in $out/slurm/, the report in $out/report/"
+    else
+      say "every stage is done; the report: $out/report/report.md (paper_grid.sh report to rewrite it)"
+    fi
     ;;
   summary)
     # The pretraining measures of every pretrain-* run under --out, one markdown row each: the
