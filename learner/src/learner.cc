@@ -490,7 +490,7 @@ struct Learner::Impl {
       worked = drain() || worked;
       publish_pacing(false);
       publish_due_snapshot();
-      if (publisher->take_request() && publisher->republish(done)) ++stats.snapshot_requests;
+      if (publisher->serve_request(done)) ++stats.snapshot_requests;
       if (publisher->seconds_since_announce() >= announce_s) publisher->announce(done);
       log_metrics();
       sweep_shared_memory();

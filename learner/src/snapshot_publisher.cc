@@ -69,6 +69,7 @@ bool SnapshotPublisher::delivered() const {
 void SnapshotPublisher::publish(msg::PolicySnapshot snapshot, bool done) {
   snapshot.run_id(run_id_);
   dds::seal(snapshot);
+  requested_.store(false);  // before the write: a request arriving after it is served by it
   snapshot_writer_.write(snapshot);
   last_write_ = std::chrono::steady_clock::now();
   newest_ = std::move(snapshot);
@@ -102,6 +103,12 @@ bool SnapshotPublisher::republish(bool done) {
   last_write_ = std::chrono::steady_clock::now();
   announce(done);
   return true;
+}
+
+bool SnapshotPublisher::serve_request(bool done) {
+  if (!requested_.load() || !newest_ || !ready()) return false;
+  requested_.store(false);  // before the write, as in publish()
+  return republish(done);
 }
 
 void SnapshotPublisher::announce_final(bool done) {

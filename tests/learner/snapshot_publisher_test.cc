@@ -2,6 +2,8 @@
 // the snapshot written, kept, written again on request and announced.
 #include "indrive/learner/snapshot_publisher.h"
 
+#include <fastrtps/attributes/LibrarySettingsAttributes.h>
+#include <fastrtps/xmlparser/XMLProfileManager.h>
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -95,13 +97,16 @@ TEST(SnapshotPublisherTest, PublishesKeepsRepublishesAndAnnounces) {
   request.run_id("run-p");
   dds::seal(request);
   requests.write(request);
-  for (int i = 0; i < 500 && !publisher.take_request(); ++i) std::this_thread::sleep_for(10ms);
+  for (int i = 0; i < 500 && !publisher.request_pending(); ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_TRUE(publisher.request_pending());
   // Written again only once the reader has the first write: a second write would replace the
   // first under a reader still fetching it.
   ASSERT_TRUE(publisher.wait_until_delivered(10s));
   EXPECT_TRUE(publisher.delivered());
   EXPECT_TRUE(publisher.ready()) << "delivered: the next snapshot may go";
-  EXPECT_TRUE(publisher.republish(/*done=*/true));
+  EXPECT_TRUE(publisher.serve_request(/*done=*/true));
+  EXPECT_FALSE(publisher.request_pending());
+  EXPECT_FALSE(publisher.serve_request(/*done=*/true)) << "one write per request";
   publisher.announce_final(/*done=*/true);
 
   // Announces are "keep last": a reader may see only the newest of quick ones, which must be
@@ -122,6 +127,63 @@ TEST(SnapshotPublisherTest, PublishesKeepsRepublishesAndAnnounces) {
   ASSERT_FALSE(announced.empty());
   for (const std::uint64_t version : announced) EXPECT_EQ(version, 3u);
   EXPECT_TRUE(done_flags.back()) << "the final announce says the run is done";
+}
+
+// A late joiner's request that arrives while the last snapshot is still on its way to another
+// reader cannot be served at once (a second write would start that reader over): it is kept
+// and served as soon as the write is acknowledged, not dropped. The reader here holds the first
+// snapshot in its callback, so its participant acknowledges nothing until the test lets go;
+// intraprocess delivery is off, or the write would run that callback on the writer's thread.
+TEST(SnapshotPublisherTest, ARequestWhileTheLastWriteIsUnacknowledgedIsServedOnceItIs) {
+  eprosima::fastrtps::LibrarySettingsAttributes library;
+  library.intraprocess_delivery = eprosima::fastrtps::INTRAPROCESS_OFF;
+  eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings(library);
+  const dds::ParticipantOptions options{
+      .domain_id = testing::unique_domain_id(),
+      .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()};
+  dds::EndpointSet learner(options);
+  SnapshotPublisher publisher(learner, "run-q", /*hold_s=*/60.0);
+  dds::EndpointSet actor(options);
+  std::atomic<int> received{0};
+  std::atomic<bool> let_go{false};
+  auto& snapshot_reader = actor.reader<msg::PolicySnapshot>([&](const msg::PolicySnapshot&) {
+    ++received;
+    while (!let_go.load()) std::this_thread::sleep_for(1ms);
+  });
+  actor.reader<msg::SnapshotAnnounce>([](const msg::SnapshotAnnounce&) {});
+  dds::EndpointSet asker(options);
+  auto& requests = asker.writer<msg::SnapshotRequest>();
+  ASSERT_TRUE(snapshot_reader.wait_for_matched(1, 10s));
+  ASSERT_TRUE(requests.wait_for_matched(1, 10s));
+  for (int i = 0; i < 1000 && publisher.readers() < 1; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_GE(publisher.readers(), 1);
+
+  msg::PolicySnapshot snapshot;
+  snapshot.version(5);
+  snapshot.architecture("image=8");
+  snapshot.heads(msg::HEAD_ENCODER);
+  snapshot.params(std::vector<std::uint8_t>(64, 9));
+  EXPECT_FALSE(publisher.serve_request(false)) << "no request yet";
+  publisher.publish(snapshot, /*done=*/false);
+  for (int i = 0; i < 1000 && received.load() == 0; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_EQ(received.load(), 1);
+  ASSERT_FALSE(publisher.ready()) << "the held reader acknowledged the first write";
+
+  msg::SnapshotRequest request;
+  request.run_id("run-q");
+  dds::seal(request);
+  requests.write(request);
+  for (int i = 0; i < 500 && !publisher.request_pending(); ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_TRUE(publisher.request_pending());
+  EXPECT_FALSE(publisher.serve_request(false)) << "the last write is still on its way";
+  EXPECT_TRUE(publisher.request_pending()) << "the request is kept, not dropped";
+
+  let_go = true;
+  ASSERT_TRUE(publisher.wait_until_delivered(10s));
+  EXPECT_TRUE(publisher.serve_request(false));
+  EXPECT_FALSE(publisher.request_pending());
+  for (int i = 0; i < 1000 && received.load() < 2; ++i) std::this_thread::sleep_for(10ms);
+  EXPECT_EQ(received.load(), 2) << "the snapshot written again for the request";
 }
 
 }  // namespace

@@ -17,7 +17,7 @@
 //     versions.reserve(version);                    // before the version leaves the process
 //     publisher.publish(std::move(snapshot), done); // sealed, written, announced
 //   }
-//   if (publisher.take_request()) publisher.republish(done);
+//   if (publisher.serve_request(done)) ++served;    // a late joiner's request, when it can be
 #pragma once
 
 #include <atomic>
@@ -81,8 +81,13 @@ class SnapshotPublisher {
   // The last announce, written reliably: waits (up to 5 s) until every matched reader has it,
   // since the heartbeat's "done" is best effort and can be lost as the process exits.
   void announce_final(bool done);
-  // Whether a SnapshotRequest of this run came since the last call.
-  bool take_request() { return requested_.exchange(false); }
+  // Serves a SnapshotRequest of this run that came since the newest snapshot was last written:
+  // writes it again (republish) and returns true. A request that cannot be served yet (no
+  // snapshot, or the last write still unacknowledged: !ready()) stays pending for a later call;
+  // a snapshot written by publish() serves it as well.
+  bool serve_request(bool done);
+  // Whether a request waits to be served.
+  bool request_pending() const { return requested_.load(); }
 
   // Readers matched by both the snapshot and the announce writer (the fewer of the two). The
   // announce is volatile: a reader that this side has not matched yet misses it, even when that
