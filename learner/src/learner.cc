@@ -19,6 +19,7 @@
 #include "indrive/dds/shm_sweeper.h"
 #include "indrive/learner/evaluation_tally.h"
 #include "indrive/learner/ingest.h"
+#include "indrive/learner/learner_config.h"
 #include "indrive/learner/rate_limiter.h"
 #include "indrive/learner/snapshot_publisher.h"
 #include "indrive/nn/kernels.h"
@@ -45,36 +46,27 @@ double unix_time_s() {
 struct Learner::Impl {
   explicit Impl(const service::ServiceConfig& service)
       : config(service),
+        settings(learner_config(service.config())),
         agent_config(service.training_agent("learner")),
         run(RunDir::open_or_create(service.run_dir().parent_path().empty()
                                        ? fs::path(".")
                                        : service.run_dir().parent_path(),
                                    service.run_id())),
-        checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
+        checkpoints(run.checkpoints(), settings.checkpoint_keep),
         versions(run.checkpoints() / kVersionReserveFile),
         replay(replay_options(agent_config)),
-        rate({.replay_ratio = service.config().get<double>("learner.replay_ratio"),
+        rate({.replay_ratio = settings.replay_ratio,
               .steps_per_update =
                   static_cast<std::int64_t>(agent_config.replay.batch) * agent_config.replay.length,
               .prefill = agent_config.replay.prefill,
-              // At least one chunk, so an actor can always finish the chunk it holds.
-              .slack = std::max(service.config().get<std::int64_t>("learner.allowance_slack"),
-                                service.config().get<std::int64_t>("actor.chunk_length")),
-              .async = service.config().get<bool>("learner.async")}),
+              .slack = settings.allowance_slack,
+              .async = settings.async}),
         chunks({.run_id = service.run_id(),
                 .height = agent_config.world_model.image,
                 .width = agent_config.world_model.image,
                 .phase = service.wire_phase(),
                 .with_rewards = agent_config.phase != agent::Phase::kPretrain}),
         metrics(run.metrics_path()) {
-    const auto& c = service.config();
-    budget = c.get<std::int64_t>("run.budget_env_steps");
-    snapshot_every = c.get<std::int64_t>("learner.snapshot_every");
-    announce_s = c.get<double>("learner.announce_s");
-    hold_s = c.get<double>("learner.snapshot_hold_s");
-    log_interval_s = c.get<double>("learner.log_interval_s");
-    log_every_steps = c.get<std::int64_t>("learner.log_every_env_steps");
-    checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
     config.config().write_yaml(run.config_path());
 
     resume();
@@ -91,7 +83,7 @@ struct Learner::Impl {
     fill_floor = stats.counters.env_steps + std::max<std::int64_t>(0, fill_target - replay.size());
 
     endpoints = std::make_unique<dds::EndpointSet>(service.participant_options("learner"));
-    publisher.emplace(*endpoints, config.run_id(), hold_s);
+    publisher.emplace(*endpoints, config.run_id(), settings.snapshot_hold_s);
     allowance_writer = &endpoints->writer<msg::StepAllowance>();
     heartbeat_writer = &endpoints->writer<msg::Heartbeat>();
     endpoints->reader<msg::TrajectoryChunk>(
@@ -130,8 +122,7 @@ struct Learner::Impl {
     const std::vector<fs::path> files = checkpoints.list();
     if (!files.empty()) {
       resume_from(files);
-    } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
-               !init.empty()) {
+    } else if (const std::string& init = settings.init_checkpoint; !init.empty()) {
       const auto bytes = read_file(init);
       std::vector<std::uint8_t> agent_bytes;
       try {
@@ -181,7 +172,8 @@ struct Learner::Impl {
       last_checkpoint = Clock::now();
       ++stats.checkpoint_failures;
       std::ostringstream next;
-      if (!final) next << "; the next try is in " << checkpoint_s << " s (free space on that disk)";
+      if (!final)
+        next << "; the next try is in " << settings.checkpoint_s << " s (free space on that disk)";
       INDRIVE_LOG(kError, "learner")
           << (final ? "final " : "") << "checkpoint "
           << checkpoints.path(counter).filename().string() << " (" << packed.size()
@@ -227,7 +219,7 @@ struct Learner::Impl {
       row.method = agent::method_label(agent_config);
       row.eval_kind = "training";
       row.task = agent::task_label(agent_config);
-      row.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
+      row.train_seed = static_cast<int>(settings.seed);
       row.episode = static_cast<int>(train_episodes->rows());
       train_episodes->write(row);
     } catch (const std::exception& error) {
@@ -271,7 +263,7 @@ struct Learner::Impl {
     }
     ++stats.counters.updates;
     // The loop publishes it right after this update (publish_due_snapshot).
-    if (stats.counters.updates % snapshot_every == 0) snapshot_due = true;
+    if (stats.counters.updates % settings.snapshot_every == 0) snapshot_due = true;
   }
 
   // Writes the due snapshot once the last one has reached every reader (or waited
@@ -299,9 +291,10 @@ struct Learner::Impl {
       ++stats.snapshot_holds_expired;
       INDRIVE_LOG(kWarn, "learner")
           << "v" << stats.counters.policy_version << " was not acknowledged by every reader "
-          << "within learner.snapshot_hold_s = " << hold_s << " s; publishing the next anyway "
-          << "(a reader has gone, or its link carries less than one snapshot per " << hold_s
-          << " s)";
+          << "within learner.snapshot_hold_s = " << settings.snapshot_hold_s
+          << " s; publishing the next anyway "
+          << "(a reader has gone, or its link carries less than one snapshot per "
+          << settings.snapshot_hold_s << " s)";
     }
     snapshot_held = false;
     snapshot_due = false;
@@ -350,7 +343,10 @@ struct Learner::Impl {
 
   std::uint64_t allowance() const {
     std::uint64_t allowed = rate.allowance(stats.counters.updates, fill_floor);
-    if (budget > 0) allowed = std::min<std::uint64_t>(allowed, static_cast<std::uint64_t>(budget));
+    if (settings.budget_env_steps > 0) {
+      allowed =
+          std::min<std::uint64_t>(allowed, static_cast<std::uint64_t>(settings.budget_env_steps));
+    }
     return allowed;
   }
 
@@ -403,7 +399,7 @@ struct Learner::Impl {
   // A metrics line and a console line when one is due (or `force`).
   void log_metrics(bool force = false) {
     const service::TrainingProgress now = progress_now();
-    if (!force && !interval.due(now, log_interval_s, log_every_steps)) return;
+    if (!force && !interval.due(now, settings.log_interval_s, settings.log_every_env_steps)) return;
     std::uint64_t episodes = 0, successes = 0;
     auto episode_record = nlohmann::json::object();  // length and reach of the actors' episodes
     {
@@ -491,12 +487,12 @@ struct Learner::Impl {
       publish_pacing(false);
       publish_due_snapshot();
       if (publisher->serve_request(done)) ++stats.snapshot_requests;
-      if (publisher->seconds_since_announce() >= announce_s) publisher->announce(done);
+      if (publisher->seconds_since_announce() >= settings.announce_s) publisher->announce(done);
       log_metrics();
       sweep_shared_memory();
-      if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
+      if (seconds_since(last_checkpoint) >= settings.checkpoint_s) save_checkpoint();
       // The budget ends the run once the updates it is owed are done.
-      if (budget > 0 && stats.counters.env_steps >= budget &&
+      if (settings.budget_env_steps > 0 && stats.counters.env_steps >= settings.budget_env_steps &&
           (rate.options().async || !ready_to_train())) {
         done = true;
         break;
@@ -549,6 +545,7 @@ struct Learner::Impl {
   }
 
   const service::ServiceConfig& config;
+  const LearnerConfig settings;  // the learner.* and run.* keys, read once
   agent::AgentConfig agent_config;
   RunDir run;
   CheckpointFiles checkpoints;
@@ -558,19 +555,12 @@ struct Learner::Impl {
   RateLimiter rate;
   ChunkQueue chunks;  // chunks on their way into the replay
   MetricsLog metrics;
-  EvaluationTally evaluations;  // evaluators' results, on the metrics lines
-  std::int64_t budget = 0;
-  std::int64_t snapshot_every = 10;
+  EvaluationTally evaluations;                      // evaluators' results, on the metrics lines
   std::optional<dds::SharedMemorySweeper> sweeper;  // of /dev/shm, when there is one
   Clock::time_point next_sweep{};
-  double hold_s = 10.0;
   bool snapshot_due = false;   // snapshot_every updates passed since the last snapshot
   bool snapshot_held = false;  // ... and it waits for a reader to acknowledge the last one
   std::chrono::steady_clock::time_point last_hold_warning{};
-  double announce_s = 1.0;
-  double log_interval_s = 5.0;
-  std::int64_t log_every_steps = 1000;
-  double checkpoint_s = 300.0;
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;
   fs::path latest_checkpoint;  // the newest intact checkpoint this learner wrote or resumed from

@@ -7,6 +7,7 @@
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
 #include "indrive/learner/learner.h"
+#include "indrive/learner/learner_config.h"
 #include "indrive/learner/page_writer.h"
 #include "indrive/service/process_cli.h"
 
@@ -28,7 +29,8 @@ int main(int argc, char** argv) {
       std::printf("%s\n", indrive::service::check_summary(config, "learner").c_str());
       return 0;
     }
-    if (const double every_s = config.config().get<double>("learner.dashboard_s"); every_s > 0) {
+    if (const double every_s = indrive::learner::learner_config(config.config()).dashboard_s;
+        every_s > 0) {
       page.emplace(indrive::own_program_folder() / "indrive", config.run_dir(), every_s);
     }
     indrive::learner::Learner learner(config);

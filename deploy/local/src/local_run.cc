@@ -21,6 +21,7 @@
 #include "indrive/basics/run_dir.h"
 #include "indrive/envserver/town.h"
 #include "indrive/learner/learner.h"
+#include "indrive/learner/learner_config.h"
 #include "indrive/nn/kernels.h"
 #include "indrive/service/training_metrics.h"
 
@@ -46,7 +47,7 @@ agent::AgentConfig local_agent_config(const service::ServiceConfig& config) {
   agent::AgentConfig agent = config.training_agent("local");
   const bool resumable = CheckpointFiles(open_run(config).checkpoints(), 1000).newest().has_value();
   if (agent.phase == agent::Phase::kFinetune && !config.config().get<bool>("local.random") &&
-      !resumable && config.config().get<std::string>("learner.init_checkpoint").empty()) {
+      !resumable && learner::learner_config(config.config()).init_checkpoint.empty()) {
     throw LocalRunError(
         "finetune needs a pretrained agent: set learner.init_checkpoint to a pretraining "
         "run's checkpoint, e.g. --set learner.init_checkpoint=runs/<run>/checkpoints/"
@@ -128,10 +129,11 @@ std::string method_name(const service::ServiceConfig& config, const agent::Agent
 struct LocalRun::Impl {
   explicit Impl(const service::ServiceConfig& service)
       : config(service),
+        settings(learner::learner_config(service.config())),
         agent_config(local_agent_config(service)),
         random(service.config().get<bool>("local.random")),
         run(open_run(service)),
-        checkpoints(run.checkpoints(), service.config().get<int>("learner.checkpoint_keep")),
+        checkpoints(run.checkpoints(), settings.checkpoint_keep),
         town(env::load_town(actor::env_config(service).town,
                             actor::env_config(service).town_options)),
         coverage(town.net, {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
@@ -143,15 +145,10 @@ struct LocalRun::Impl {
             },
             [this](const EpisodeRecord& record) { write_training_episode(record); }),
         trainer(agent_config, environment,
-                {.train_ratio = service.config().get<double>("learner.replay_ratio"),
-                 .snapshot_every = service.config().get<int>("learner.snapshot_every")}),
+                {.train_ratio = settings.replay_ratio,
+                 .snapshot_every = static_cast<int>(settings.snapshot_every)}),
         metrics(run.metrics_path()) {
-    const auto& c = service.config();
-    budget = c.get<std::int64_t>("run.budget_env_steps");
-    log_interval_s = c.get<double>("learner.log_interval_s");
-    log_every_steps = c.get<std::int64_t>("learner.log_every_env_steps");
-    checkpoint_s = c.get<double>("learner.checkpoint_minutes") * 60.0;
-    c.write_yaml(run.config_path());
+    service.config().write_yaml(run.config_path());
     INDRIVE_LOG(kInfo, "local") << nn::kernel_report();
     service.note_agent_precision(trainer.agent(), "local");
     resume();
@@ -175,8 +172,7 @@ struct LocalRun::Impl {
       INDRIVE_LOG(kInfo, "local") << "resumed from " << newest->string() << " at " << base.env_steps
                                   << " env steps, " << base.updates << " updates, "
                                   << trainer.replay().size() << " replay steps";
-    } else if (const auto init = config.config().get<std::string>("learner.init_checkpoint");
-               !init.empty()) {
+    } else if (const std::string& init = settings.init_checkpoint; !init.empty()) {
       if (!fs::exists(init)) {
         throw LocalRunError("learner.init_checkpoint '" + init +
                             "' does not exist: point it at a pretraining run's checkpoint "
@@ -292,7 +288,7 @@ struct LocalRun::Impl {
     record.run_id = config.run_id();
     record.method = method_name(config, agent_config);
     record.task = agent::task_label(agent_config);
-    record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
+    record.train_seed = static_cast<int>(settings.seed);
     record.policy_version = updates();
     // Opened at the first episode (a run that only reloads or reports writes none); a resumed
     // run numbers its episodes on from the rows there.
@@ -318,12 +314,14 @@ struct LocalRun::Impl {
       on_update(step);
       on_update(trainer.agent().last_timing().as_metrics());
     };
+    const std::int64_t budget = settings.budget_env_steps;
     while (!stop.load() && (budget <= 0 || env_steps() < budget)) {
       // Small slices keep the stop signal, logging and checkpoints responsive.
       const std::int64_t slice = budget > 0 ? std::min<std::int64_t>(16, budget - env_steps()) : 16;
       trainer.run(slice, on_metrics, &stop);
-      if (interval.due(progress_now(), log_interval_s, log_every_steps)) log_metrics();
-      if (seconds_since(last_checkpoint) >= checkpoint_s) save_checkpoint();
+      if (interval.due(progress_now(), settings.log_interval_s, settings.log_every_env_steps))
+        log_metrics();
+      if (seconds_since(last_checkpoint) >= settings.checkpoint_s) save_checkpoint();
     }
     // A session that took no step (budget already reached) leaves the files of the last one.
     if (trainer.counters().env_steps == 0) return;
@@ -342,6 +340,7 @@ struct LocalRun::Impl {
   }
 
   const service::ServiceConfig& config;
+  const learner::LearnerConfig settings;  // the learner.* and run.* keys, read once
   agent::AgentConfig agent_config;
   bool random;
   RunDir run;
@@ -353,10 +352,6 @@ struct LocalRun::Impl {
   agent::LocalTrainer trainer;
   MetricsLog metrics;
   learner::LearnerCounters base;
-  std::int64_t budget = 0;
-  double log_interval_s = 5.0;
-  std::int64_t log_every_steps = 1000;
-  double checkpoint_s = 300.0;
   std::map<std::string, std::pair<double, std::int64_t>> interval_sums;
   std::int64_t non_finite = 0;
   std::function<void(const std::string&)> progress;
@@ -442,7 +437,7 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
     record.method = method_name(config, agent_config);
     record.eval_kind = agent_config.phase == agent::Phase::kPretrain ? "zero_shot" : "few_shot";
     record.task = agent::task_label(agent_config);
-    record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
+    record.train_seed = static_cast<int>(learner::learner_config(config.config()).seed);
     record.policy_version = version;
     csv.write(record);
     ++summary.episodes;
