@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "indrive/actor/actor_config.h"
 #include "indrive/actor/env_adapter.h"
 #include "indrive/actor/policies.h"
 #include "indrive/actor/protocol_episode.h"
@@ -63,16 +64,15 @@ const std::string& curve_csv_header() {
 }
 
 ProtocolGrid protocol_grid(const config::Config& config) {
+  const EvalConfig eval = eval_config(config);
   ProtocolGrid grid;
-  grid.towns = split_list(config.get<std::string>("eval.towns"));
+  grid.towns = split_list(eval.towns);
   env::TownOptions town_options;
   town_options.route_set = config.get<std::string>("env.route_set");
-  set_grid_routes(grid, config.get<std::string>("eval.routes"), town_options);
+  set_grid_routes(grid, eval.routes, town_options);
   grid.densities.clear();
-  for (double density : config.get<std::vector<double>>("eval.densities")) {
-    grid.densities.push_back(static_cast<int>(density));
-  }
-  grid.episodes_per_cell = config.get<int>("eval.episodes_per_cell");
+  for (double density : eval.densities) grid.densities.push_back(static_cast<int>(density));
+  grid.episodes_per_cell = eval.episodes_per_cell;
   grid.validate();
   check_grid_names(grid);
   return grid;
@@ -81,16 +81,17 @@ ProtocolGrid protocol_grid(const config::Config& config) {
 struct Evaluator::Impl {
   Impl(const service::ServiceConfig& service, int evaluator_index, int evaluator_count)
       : config(service),
+        eval(eval_config(service.config())),
+        actor_settings(actor_config(service.config())),
         index(evaluator_index),
         count(evaluator_count),
         agent_config(service.agent()),
         grid(protocol_grid(service.config())) {
-    const config::Config& c = service.config();
     // Inputs first, so a mistake is reported before SUMO or DDS start.
-    source = parse_policy_source(c.get<std::string>("eval.policy"));
-    head = resolve_head(c.get<std::string>("eval.head"), c.get<std::string>("eval.kind"));
-    snapshot_file = c.get<std::string>("eval.snapshot_file");
-    continuous = c.get<bool>("eval.continuous");
+    source = parse_policy_source(eval.policy);
+    head = resolve_head(eval.head, eval.kind);
+    snapshot_file = eval.snapshot_file;
+    continuous = eval.continuous;
     if (!snapshot_file.empty() && source != PolicySource::kSnapshot) {
       throw EvalError("eval.snapshot_file (--snapshot) is given but eval.policy is '" +
                       std::string(to_string(source)) + "'; use --policy snapshot");
@@ -103,9 +104,9 @@ struct Evaluator::Impl {
     (void)grid.episodes_for(index, count);  // throws for an index outside the count
     switch (source) {
       case PolicySource::kOracle:
-        method = c.get<bool>("eval.oracle_brake") ? "oracle" : "oracle_nobrake";
-        policy = make_oracle_policy({.target_speed_mps = c.get<double>("eval.oracle_speed_mps"),
-                                     .brake_for_leader = c.get<bool>("eval.oracle_brake")});
+        method = eval.oracle_brake ? "oracle" : "oracle_nobrake";
+        policy = make_oracle_policy(
+            {.target_speed_mps = eval.oracle_speed_mps, .brake_for_leader = eval.oracle_brake});
         break;
       case PolicySource::kRandom:
         method = "random";
@@ -137,14 +138,12 @@ struct Evaluator::Impl {
     if (source == PolicySource::kSnapshot && snapshot_file.empty()) {
       inbox = std::make_unique<SnapshotInbox>(service.run_id(),
                                               service::architecture_descriptor(agent_config),
-                                              c.get<double>("actor.request_after_s"));
-      rejoin = RejoinSchedule(c.get<double>("actor.rejoin_after_s"),
-                              c.get<double>("actor.rejoin_max_s"));
+                                              actor_settings.request_after_s);
+      rejoin = RejoinSchedule(actor_settings.rejoin_after_s, actor_settings.rejoin_max_s);
       connect();
     }
-    env::EnvConfig env_config =
-        protocol_env_config(actor::env_config(service, agent_config),
-                            parse_protocol(service.config().get<std::string>("eval.protocol")));
+    env::EnvConfig env_config = protocol_env_config(actor::env_config(service, agent_config),
+                                                    parse_protocol(eval.protocol));
     env_config.town = grid.towns.front();
     env = std::make_unique<env::Env>(env_config);
   }
@@ -220,7 +219,7 @@ struct Evaluator::Impl {
   // True when the learner has not been heard from for eval.learner_silence_s since `since` (the
   // later of the two counts): it died, or it ended without its final announce reaching us.
   bool learner_silent(Clock::time_point since) const {
-    const double limit_s = config.config().get<double>("eval.learner_silence_s");
+    const double limit_s = eval.learner_silence_s;
     if (limit_s <= 0.0) return false;
     const Clock::time_point beat{Clock::duration(last_learner_beat.load())};
     return std::chrono::duration<double>(Clock::now() - std::max(since, beat)).count() > limit_s;
@@ -230,8 +229,7 @@ struct Evaluator::Impl {
   void warn_silent_learner(const std::string& consequence) const {
     INDRIVE_LOG(kWarn, "evaluator")
         << "the learner of run '" << config.run_id() << "' has been silent for more than "
-        << config.config().get<double>("eval.learner_silence_s")
-        << " s without announcing its final snapshot; " << consequence
+        << eval.learner_silence_s << " s without announcing its final snapshot; " << consequence
         << " (eval.learner_silence_s sets the wait, 0 waits for the learner)";
   }
   void warn_evaluating_unannounced(std::uint64_t version) const {
@@ -349,9 +347,9 @@ struct Evaluator::Impl {
       EpisodeRecord record = protocol_record(spec, outcome);
       record.run_id = config.run_id();
       record.method = method;
-      record.eval_kind = config.config().get<std::string>("eval.kind");
+      record.eval_kind = eval.kind;
       record.task = task;
-      record.train_seed = static_cast<int>(config.config().get<std::int64_t>("run.seed"));
+      record.train_seed = static_cast<int>(agent_config.seed);
       record.policy_version = static_cast<long long>(version);
       if (csv != nullptr) csv->write(record);
       if (curve != nullptr) curve->write(env_steps, record);
@@ -383,9 +381,8 @@ struct Evaluator::Impl {
     if (!policy) {
       // A learner's snapshot over DDS.
       const auto start = Clock::now();
-      const double timeout_s = config.config().get<double>("eval.snapshot_timeout_s");
-      auto snapshot =
-          wait_for_snapshot(stop, 0, config.config().get<bool>("eval.wait_for_done"), timeout_s);
+      const double timeout_s = eval.snapshot_timeout_s;
+      auto snapshot = wait_for_snapshot(stop, 0, eval.wait_for_done, timeout_s);
       if (snapshot == nullptr) {
         if (stop.load()) return 0;
         INDRIVE_LOG(kError, "evaluator")
@@ -411,8 +408,8 @@ struct Evaluator::Impl {
   }
 
   int run_continuous(const std::atomic<bool>& stop) {
-    const int every_k = config.config().get<int>("eval.every_k");
-    const double timeout_s = config.config().get<double>("eval.snapshot_timeout_s");
+    const int every_k = eval.every_k;
+    const double timeout_s = eval.snapshot_timeout_s;
     CurveWriter curve(config.run_dir() / "eval" / ("curve-" + std::to_string(index) + ".csv"));
     std::uint64_t evaluated = 0;
     int evaluations = 0;
@@ -480,6 +477,8 @@ struct Evaluator::Impl {
   }
 
   const service::ServiceConfig& config;
+  const EvalConfig eval;             // the eval.* keys, read once
+  const ActorConfig actor_settings;  // the actor.* keys, read once
   int index;
   int count;
   agent::AgentConfig agent_config;

@@ -2,6 +2,7 @@
 
 #include <optional>
 
+#include "indrive/actor/actor_config.h"
 #include "indrive/actor/episode_video.h"
 #include "indrive/actor/protocol_record.h"
 #include "indrive/basics/check.h"
@@ -11,11 +12,12 @@ namespace indrive::actor {
 
 ProtocolEpisodeOptions protocol_episode_options(const config::Config& config,
                                                 const std::filesystem::path& video_dir) {
-  return {.protocol = parse_protocol(config.get<std::string>("eval.protocol")),
-          .budget_speed_mps = config.get<double>("eval.budget_speed_mps"),
-          .budget_slack = config.get<double>("eval.budget_slack"),
-          .code_budget_steps = config.get<int>("eval.indrive_code_budget_steps"),
-          .video_episodes = config.get<int>("eval.video_episodes"),
+  const EvalConfig eval = eval_config(config);
+  return {.protocol = parse_protocol(eval.protocol),
+          .budget_speed_mps = eval.budget_speed_mps,
+          .budget_slack = eval.budget_slack,
+          .code_budget_steps = eval.indrive_code_budget_steps,
+          .video_episodes = eval.video_episodes,
           .video_dir = video_dir};
 }
 

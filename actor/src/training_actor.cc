@@ -5,6 +5,7 @@
 #include <random>
 #include <thread>
 
+#include "indrive/actor/actor_config.h"
 #include "indrive/actor/allowance_gate.h"
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/env_adapter.h"
@@ -40,11 +41,12 @@ struct TrainingActor::Impl {
         id(actor_id),
         agent_config(service.agent()),
         env_config(actor::env_config(service)),
-        chunk_length(service.config().get<int>("actor.chunk_length")),
-        heartbeat_period_s(service.config().get<double>("actor.heartbeat_s")),
+        settings(actor_config(service.config())),
+        chunk_length(settings.chunk_length),
+        heartbeat_period_s(settings.heartbeat_s),
         with_rewards(agent_config.phase != agent::Phase::kPretrain),
         inbox(service.run_id(), service::architecture_descriptor(agent_config),
-              service.config().get<double>("actor.request_after_s")),
+              settings.request_after_s),
         gate(service.run_id()),
         builder({.run_id = service.run_id(),
                  .actor_id = actor_id,
@@ -54,13 +56,9 @@ struct TrainingActor::Impl {
                  .phase = service.wire_phase(),
                  .with_rewards = with_rewards}),
         policy(agent_config),
-        random_policy(static_cast<std::uint64_t>(service.config().get<std::int64_t>("run.seed")) *
-                          1000003u +
-                      actor_id),
-        rng(static_cast<std::uint64_t>(service.config().get<std::int64_t>("run.seed")) * 7919u +
-            actor_id + 1),
-        rejoin(service.config().get<double>("actor.rejoin_after_s"),
-               service.config().get<double>("actor.rejoin_max_s")) {
+        random_policy(agent_config.seed * 1000003u + actor_id),
+        rng(agent_config.seed * 7919u + actor_id + 1),
+        rejoin(settings.rejoin_after_s, settings.rejoin_max_s) {
     // DDS first: a learner can see this actor while SUMO is still loading.
     connect();
     heartbeat("starting");
@@ -72,7 +70,7 @@ struct TrainingActor::Impl {
     coverage = std::make_unique<env::CoverageTracker>(
         env->town().net,
         env::CoverageOptions{.segment_m = service.config().get<double>("env.coverage_segment_m")});
-    coverage_period_s = service.config().get<double>("actor.coverage_period_s");
+    coverage_period_s = settings.coverage_period_s;
     INDRIVE_LOG(kInfo, "actor") << "actor " << id << " of run '" << service.run_id()
                                 << "' ready: town " << env_config.town << ", image "
                                 << agent_config.world_model.image << ", architecture '"
@@ -367,6 +365,7 @@ struct TrainingActor::Impl {
   std::uint32_t id;
   agent::AgentConfig agent_config;
   env::EnvConfig env_config;
+  const ActorConfig settings;  // the actor.* keys, read once
   int chunk_length;
   double heartbeat_period_s;
   bool with_rewards;
