@@ -118,7 +118,7 @@ struct TrainingActor::Impl {
   // that is merely gone is found again the same way when it returns. Called only where this actor
   // waits for the learner. Over UDP only a participant that has never heard the learner does it:
   // once heard, silence means a cut link across hosts, where replacing it hurts: the chunks the old
-  // participant still held for the learner were lost (tests/learner/two_host_test.cc); a
+  // participant still held for the learner were lost (tests/system/two_host_test.cc); a
   // participant that never heard the learner holds none (no allowance, no chunk).
   // Each replacement that hears nothing either doubles the wait for the next, up to
   // actor.rejoin_max_s (rejoin.h).

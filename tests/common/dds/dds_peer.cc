@@ -9,7 +9,7 @@
 //     Joins late, checks the snapshot and every chunk against the synthetic generator, counts
 //     drops, and writes its counts to --result once all arrived (exit 0) or at the timeout.
 //   dds_peer intrude --profiles F --domain D --run-id R --timeout S --result PATH [--actor-id N]
-//     An outsider of a run (tests/learner/two_host_test.cc): reads every topic for S seconds
+//     An outsider of a run (tests/system/two_host_test.cc): reads every topic for S seconds
 //     (or until SIGTERM) and counts the samples it gets from others, writes a sealed chunk as
 //     actor N (default 7) every 100 ms and one snapshot of version 1000, and records which of
 //     its writers could not be made (DDS Security may deny them) and how many readers of other
