@@ -11,9 +11,9 @@
 
 #include "indrive/actor/actor_config.h"
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/eval_protocol_episode.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/policies.h"
-#include "indrive/actor/protocol_episode.h"
-#include "indrive/actor/protocol_record.h"
 #include "indrive/actor/rejoin.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/actor/snapshot_inbox.h"

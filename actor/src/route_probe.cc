@@ -13,9 +13,9 @@
 #include <tuple>
 
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/evaluator.h"
 #include "indrive/actor/policies.h"
-#include "indrive/actor/protocol_record.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/policy.h"
 #include "indrive/basics/check.h"

@@ -9,7 +9,7 @@
 #include "indrive/actor/allowance_gate.h"
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/env_adapter.h"
-#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/rejoin.h"
 #include "indrive/actor/snapshot_inbox.h"
 #include "indrive/agent/policy.h"

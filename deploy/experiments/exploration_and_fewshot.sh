@@ -7,7 +7,7 @@
 #   2. few-shot transfer: lane following on the straight route, finetuned from the disag
 #      pretraining vs DreamerV3 from scratch with the same task budget, scored by the success
 #      rate over a fixed number of evaluation episodes (sampled actions, the protocol's traffic and
-#      spawn seeds from actor/protocol.h).
+#      spawn seeds from actor/eval_protocol.h).
 # It prints a table at the end and leaves every run directory (metrics.jsonl, checkpoints,
 # coverage.csv, eval/*.csv, plots/) under --out.
 #

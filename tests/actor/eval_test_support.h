@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/actor/protocol.h"
+#include "indrive/actor/eval_protocol.h"
 #include "indrive/agent/agent.h"
 #include "indrive/agent/snapshot_file.h"
 

@@ -14,8 +14,8 @@
 #include <thread>
 
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/policies.h"
-#include "indrive/actor/protocol_record.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
 #include "indrive/basics/episode_csv.h"

@@ -8,7 +8,7 @@
 #include <numbers>
 
 #include "eval_test_support.h"
-#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent.h"
 #include "indrive/agent/policy.h"

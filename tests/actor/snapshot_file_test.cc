@@ -9,8 +9,8 @@
 #include <fstream>
 
 #include "eval_test_support.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/policies.h"
-#include "indrive/actor/protocol_record.h"
 #include "indrive/agent/agent.h"
 #include "indrive/agent/policy.h"
 #include "indrive/envserver/town.h"

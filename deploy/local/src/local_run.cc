@@ -9,10 +9,10 @@
 #include <sstream>
 
 #include "indrive/actor/env_adapter.h"
+#include "indrive/actor/eval_protocol.h"
+#include "indrive/actor/eval_protocol_episode.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/policies.h"
-#include "indrive/actor/protocol.h"
-#include "indrive/actor/protocol_episode.h"
-#include "indrive/actor/protocol_record.h"
 #include "indrive/agent/local_trainer.h"
 #include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/check.h"

@@ -47,7 +47,7 @@ struct EvalConfig {
   double learner_silence_s = 120.0;
   bool continuous = false;
   int every_k = 1;
-  // How an episode is judged (protocol_episode.h).
+  // How an episode is judged (eval_protocol_episode.h).
   std::string protocol = "strict";  // strict or indrive_code
   int indrive_code_budget_steps = 30000;
   double budget_speed_mps = 3.0;

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/agent/local_trainer.h"
 #include "indrive/envserver/env.h"
 #include "indrive/service/run_config.h"

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "indrive/actor/protocol.h"
+#include "indrive/actor/eval_protocol.h"
 #include "indrive/envserver/bev.h"
 #include "indrive/envserver/env.h"
 #include "indrive/envserver/video.h"

@@ -1,7 +1,7 @@
 // The evaluator: an actor in evaluation mode. It runs its share of the protocol grid
-// (protocol.h), one protocol episode at a time (protocol_episode.h), with one policy source
-// (policies.h) and writes one CSV row (and, when it
-// evaluates a learner's snapshot, one EpisodeResult on DDS) per episode.
+// (eval_protocol.h), one protocol episode at a time (eval_protocol_episode.h), with one policy
+// source (policies.h) and writes one CSV row (and, when it evaluates a learner's snapshot, one
+// EpisodeResult on DDS) per episode.
 //
 // Policy sources (eval.policy, or indrive-actor --policy):
 //   snapshot  the learner's snapshot over DDS (by default its last one, once the learner reports
@@ -30,7 +30,7 @@
 #include <memory>
 #include <string>
 
-#include "indrive/actor/protocol.h"
+#include "indrive/actor/eval_protocol.h"
 #include "indrive/service/run_config.h"
 
 namespace indrive::actor {

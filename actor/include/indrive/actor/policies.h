@@ -12,7 +12,7 @@
 #include <span>
 #include <string>
 
-#include "indrive/actor/protocol.h"
+#include "indrive/actor/eval_protocol.h"
 #include "indrive/actor/snapshot_file.h"
 #include "indrive/agent/agent_config.h"
 #include "indrive/envserver/env.h"

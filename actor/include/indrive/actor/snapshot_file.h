@@ -10,7 +10,7 @@
 #include <utility>
 #include <vector>
 
-#include "indrive/actor/protocol.h"
+#include "indrive/actor/eval_protocol.h"
 #include "indrive/agent/agent_config.h"
 #include "indrive/agent/snapshot_file.h"
 

@@ -84,7 +84,7 @@ struct EvaluationSummary {
 // likely ones with agent.eval_sample=false; random actions when local.random is set) on `route`
 // of env.town:
 // `episodes` episodes per density of eval.densities with the protocol's traffic and spawn seeds
-// (actor/protocol.h). An episode succeeds when it reaches the route's destination without a
+// (actor/eval_protocol.h). An episode succeeds when it reaches the route's destination without a
 // failure event. Appends one row per episode to <run>/eval/local-<town>-<route>.csv, and records
 // the first eval.video_episodes episodes of every density to <run>/videos/eval-*.mp4 (the
 // evaluator's videos). Throws LocalRunError when the run has no checkpoint (and is not random).

@@ -13,8 +13,8 @@
 #include <cstdint>
 #include <filesystem>
 
+#include "indrive/actor/eval_protocol.h"
 #include "indrive/actor/policies.h"
-#include "indrive/actor/protocol.h"
 #include "indrive/basics/config.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/envserver/env.h"

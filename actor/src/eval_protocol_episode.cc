@@ -1,10 +1,10 @@
-#include "indrive/actor/protocol_episode.h"
+#include "indrive/actor/eval_protocol_episode.h"
 
 #include <optional>
 
 #include "indrive/actor/actor_config.h"
 #include "indrive/actor/episode_video.h"
-#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/basics/check.h"
 #include "indrive/envserver/events.h"
 

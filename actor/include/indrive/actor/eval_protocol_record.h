@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <string>
 
-#include "indrive/actor/protocol.h"
+#include "indrive/actor/eval_protocol.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/envserver/env.h"
 

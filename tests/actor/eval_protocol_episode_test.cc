@@ -1,6 +1,6 @@
-// Tests of protocol_episode.h: one protocol episode, as the evaluator and the local trainer's
+// Tests of eval_protocol_episode.h: one protocol episode, as the evaluator and the local trainer's
 // evaluation both run it.
-#include "indrive/actor/protocol_episode.h"
+#include "indrive/actor/eval_protocol_episode.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 #include <memory>
 
 #include "indrive/actor/episode_video.h"
-#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/eval_protocol_record.h"
 #include "indrive/envserver/events.h"
 #include "testing.h"
 

@@ -1,4 +1,4 @@
-#include "indrive/actor/protocol.h"
+#include "indrive/actor/eval_protocol.h"
 
 #include <algorithm>
 #include <cctype>

@@ -1,4 +1,4 @@
-#include "indrive/actor/protocol_record.h"
+#include "indrive/actor/eval_protocol_record.h"
 
 #include <algorithm>
 #include <cmath>

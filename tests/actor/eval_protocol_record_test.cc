@@ -1,5 +1,5 @@
-// Tests of protocol_record.h: grid names, the step budget, route completion and the verdict.
-#include "indrive/actor/protocol_record.h"
+// Tests of eval_protocol_record.h: grid names, the step budget, route completion and the verdict.
+#include "indrive/actor/eval_protocol_record.h"
 
 #include <gtest/gtest.h>
 
