@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <tuple>
 
+#include "indrive/actor/actor_config.h"
 #include "indrive/actor/env_adapter.h"
 #include "indrive/actor/eval_protocol_record.h"
 #include "indrive/actor/evaluator.h"
@@ -401,19 +402,19 @@ ProbeReport score_route_probe(const std::vector<ProbeSample>& samples,
 
 std::string probe_settings(const config::Config& c) {
   const ProtocolGrid grid = protocol_grid(c);
+  const EvalConfig eval = eval_config(c);
   auto join = [](const auto& items) {
     std::ostringstream text;
     for (size_t i = 0; i < items.size(); ++i) text << (i ? ", " : "") << items[i];
     return text.str();
   };
-  return "Collected: the oracle at " + fixed(c.get<double>("eval.oracle_speed_mps"), 1) + " m/s, " +
-         (c.get<bool>("eval.probe_oracle_brake")
+  return "Collected: the oracle at " + fixed(eval.oracle_speed_mps, 1) + " m/s, " +
+         (eval.probe_oracle_brake
               ? "coasting behind leaders and for crossing traffic (eval.probe_oracle_brake)"
               : "never coasting") +
-         "; states from " + fixed(c.get<double>("eval.probe_far_m"), 1) + " m to " +
-         fixed(c.get<double>("eval.probe_near_m"), 1) + " m before each junction; towns " +
-         join(grid.towns) + "; routes " + join(grid.routes) + "; densities " +
-         join(grid.densities) + "; " + std::to_string(grid.episodes_per_cell) +
+         "; states from " + fixed(eval.probe_far_m, 1) + " m to " + fixed(eval.probe_near_m, 1) +
+         " m before each junction; towns " + join(grid.towns) + "; routes " + join(grid.routes) +
+         "; densities " + join(grid.densities) + "; " + std::to_string(grid.episodes_per_cell) +
          " episodes per town x route x density.";
 }
 
@@ -481,21 +482,20 @@ struct RouteProbe::Impl {
 };
 
 RouteProbe::RouteProbe(const service::ServiceConfig& service) : impl_(std::make_unique<Impl>()) {
-  const config::Config& c = service.config();
-  impl_->grid = protocol_grid(c);
-  impl_->near_m = c.get<double>("eval.probe_near_m");
-  impl_->far_m = c.get<double>("eval.probe_far_m");
+  const EvalConfig eval = eval_config(service.config());
+  impl_->grid = protocol_grid(service.config());
+  impl_->near_m = eval.probe_near_m;
+  impl_->far_m = eval.probe_far_m;
   if (impl_->near_m >= impl_->far_m) {
     throw EvalError("eval.probe_near_m (" + fixed(impl_->near_m, 1) +
                     ") must be below eval.probe_far_m (" + fixed(impl_->far_m, 1) + ")");
   }
-  impl_->budget_speed_mps = c.get<double>("eval.budget_speed_mps");
-  impl_->budget_slack = c.get<double>("eval.budget_slack");
-  const std::string given = c.get<std::string>("eval.snapshot_file");
+  impl_->budget_speed_mps = eval.budget_speed_mps;
+  impl_->budget_slack = eval.budget_slack;
+  const std::string& given = eval.snapshot_file;
   if (given.empty()) throw EvalError("the route probe needs a snapshot file: --snapshot FILE");
   const std::string file_name = snapshot_file_path(given);
-  const PolicyHead head =
-      resolve_head(c.get<std::string>("eval.head"), c.get<std::string>("eval.kind"));
+  const PolicyHead head = resolve_head(eval.head, eval.kind);
   const agent::SnapshotFile file = agent::read_snapshot_file(file_name);
   const std::string source = "snapshot file " + file_name;
   impl_->agent_config = service.agent();
@@ -514,8 +514,8 @@ RouteProbe::RouteProbe(const service::ServiceConfig& service) : impl_(std::make_
                     "): " + error.what());
   }
   impl_->policy->keep_embedding(true);
-  impl_->oracle = make_oracle_policy({.target_speed_mps = c.get<double>("eval.oracle_speed_mps"),
-                                      .brake_for_leader = c.get<bool>("eval.probe_oracle_brake")});
+  impl_->oracle = make_oracle_policy(
+      {.target_speed_mps = eval.oracle_speed_mps, .brake_for_leader = eval.probe_oracle_brake});
   env::EnvConfig config = protocol_env_config(actor::env_config(service, impl_->agent_config));
   config.town = impl_->grid.towns.front();
   impl_->env = std::make_unique<env::Env>(config);
