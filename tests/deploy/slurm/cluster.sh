@@ -61,6 +61,9 @@ EOF
     for ns in "$NS_A" "$NS_B"; do ip -n "$ns" link set lo up; done
     ip -n "$NS_A" link set "sa$$" up
     ip -n "$NS_B" link set "sb$$" up
+    # Multicast over the link, as on one LAN: a run with DDS Security discovers by multicast.
+    ip -n "$NS_A" route add 224.0.0.0/4 dev "sa$$"
+    ip -n "$NS_B" route add 224.0.0.0/4 dev "sb$$"
 
     head -c 1024 /dev/urandom > "$DIR/munge.key"
     chmod 400 "$DIR/munge.key"

@@ -9,7 +9,9 @@
 #      resubmission, which resumes again and ends at the run's budget;
 #   3. submits a two-cell grid (disag, seeds 0 and 1, pretrain and zero-shot, `tiny`, small
 #      budgets) with paper_grid.sh grid --slurm, checks the report, and checks that a second
-#      submission submits nothing.
+#      submission submits nothing;
+#   4. submits the service with DDS Security (--dds-security) and checks that it authenticates
+#      across the nodes and ends with its report.
 # Prints each step's seconds and the processes each node ran. Needs root, iproute2, slurm-wlm
 # and munge; exits 77 (skipped) without them.
 #
@@ -186,6 +188,19 @@ check "the grid's report: disag's cells over 2 seeds (seeds: $seeds)" test "$see
 check "the report's tables" grep -q "^| disag" "$work/grid/report/report.md"
 on_a "${grid[@]}" > "$work/grid-again.log"
 check "a second submission submits nothing" grep -q "every stage is done" "$work/grid-again.log"
+
+# 4. The service with DDS Security across the nodes (multicast discovery: no discovery server).
+say "4. the service with DDS Security on both nodes, budget 400 env steps"
+run4="$work/runs/secure"
+bash "$source_dir/deploy/dds/make_security.sh" "$work/security" > /dev/null
+id=$(on_a sbatch --parsable --nodes=2 --output="$work/service-%j.out" "${service[@]}" \
+  --run-dir "$run4" --set run.budget_env_steps=400 --dds-security "$work/security")
+wait_job "$id" 300 || true
+grep "service" "$work/service-$id.out"
+check "the secure job completed with exit 0" test "$(job_state "$id")" = COMPLETED -a "$(job_exit "$id")" = 0:0
+check "the learner authenticated the other participants" grep -q "DDS Security authenticated" "$run4/logs/learner.log"
+check "the secure run's report" grep -q "^## Zero-shot" "$run4/report.md"
+check "no process of job $id left" no_process_left "$id"
 
 say "$failures failure(s)"
 [[ $failures == 0 ]]
