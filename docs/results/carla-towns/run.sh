@@ -45,6 +45,14 @@ for m in disag icm rnd; do
 done
 deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --seed 0 --method random \
   --stages "pretrain zeroshot" --episodes 50
+# Few-shot LF and CA from LD's seed-0 pretraining (10,000 task steps on carla_town01's routes at
+# replay ratio 512, then evaluated like the zero-shot), side by side, one core each; on
+# 2026-12-07, about 70 minutes of training each beside other work.
+for t in lane_following collision_avoidance; do
+  deploy/experiments/paper_grid.sh grid --towns carla --out runs/carla-grid --seeds 0 --methods disag \
+    --stages "pretrain fewshot" --task "$t" --episodes 50 &
+done
+wait
 
 # The page: each evaluation's CSV under sanity/eval/ and shipped/eval/ with their reports, and
 # the grid's runs, CSVs, seed-0 snapshots, pretraining summary and report.
