@@ -78,7 +78,8 @@ env::EnvConfig protocol_env_config(env::EnvConfig config, EvalProtocol protocol)
 
 EpisodeRecord protocol_record(const EpisodeSpec& spec, std::uint32_t events, int steps,
                               double route_completion, double episode_return) {
-  const std::uint32_t failures = events & env::kFailureEvents;
+  // An env_fault is reported as the reason so that reports can count it apart.
+  const std::uint32_t failures = events & (env::kFailureEvents | env::kEnvFault);
   EpisodeRecord record;
   record.town = spec.town;
   record.route = spec.route;
@@ -104,7 +105,7 @@ EpisodeRecord training_record(const TrainingEpisode& episode, const env::StepRes
   record.spawn_seed = episode.spawn_seed;
   record.steps = static_cast<int>(last.step);
   record.episode_return = episode.episode_return;
-  std::uint32_t failures = last.events & env::kFailureEvents;
+  std::uint32_t failures = last.events & (env::kFailureEvents | env::kEnvFault);
   if (episode.route.empty()) {
     failures &= ~env::kTimeLimit;
     record.success = failures == 0;

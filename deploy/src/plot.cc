@@ -508,6 +508,8 @@ EvalCurves read_eval_curves(const std::vector<std::filesystem::path>& files) {
         const int success = std::stoi(fields[column["success"]]);
         const double completion = std::stod(fields[column["route_completion"]]);
         if (success != 0 && success != 1) throw bad("success must be 0 or 1");
+        const auto reason = column.find("failure_reason");
+        if (reason != column.end() && fields[reason->second] == "env_fault") continue;
         Sum& sum = sums[fields[column["town"]]][steps];
         ++sum.episodes;
         sum.successes += success;

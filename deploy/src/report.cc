@@ -138,6 +138,10 @@ Report aggregate(const std::vector<EpisodeRecord>& records) {
       counts;
   std::set<std::pair<int, std::string>> other_routes;  // (kind rank, name)
   for (const auto& r : records) {
+    if (r.failure_reason == "env_fault") {
+      ++report.env_faults;
+      continue;
+    }
     const TableKey key{r.protocol, r.eval_kind, r.task};
     Table& table = report.tables[key];
     push_unique(table.methods, r.method);
@@ -338,7 +342,12 @@ std::string render_markdown(const Report& report, const std::string& seen_name,
                             const std::string& route_set) {
   std::ostringstream md;
   md << "# Results\n\n"
-     << report.episodes << " episodes from " << report.runs.size() << " run(s). SR = % of "
+     << report.episodes << " episodes from " << report.runs.size() << " run(s)"
+     << (report.env_faults > 0
+             ? " (" + std::to_string(report.env_faults) +
+                   " of them ended by a SUMO fault, env_fault, and are left out of every cell)"
+             : std::string())
+     << ". SR = % of "
      << "successful episodes, FR = 100 - SR. Each cell: SR averaged uniformly over the "
      << "densities evaluated, then over training seeds; [95% CI] is a t-interval over seeds "
      << "when there are 2 or more, otherwise a Wilson interval on the pooled episodes; n = "

@@ -82,23 +82,17 @@ StepResult Env::reset(const ResetOptions& options) {
     start_edge = town_->net.edge(town_->net.lane(spawn.lane).edge).id;
   }
 
-  // A fresh simulation per episode: the same seeds give the same episode.
-  sumo_->load(town_->net_file, options.traffic_seed);
-  ego_ = EgoState{.pose = start};
-  // On a route SUMO gets the ego's path (a loop three laps over, more than any budget lets it
-  // drive), so traffic at junctions yields to it as to any vehicle on the major road.
-  std::vector<std::string> ego_route;
-  if (route_ != nullptr) {
-    const int laps = route_->is_loop() ? 3 : 1;
-    for (int lap = 0; lap < laps; ++lap) {
-      ego_route.insert(ego_route.end(), route_->spec().edges.begin(), route_->spec().edges.end());
-    }
+  if (sumo_failed_) restart_sumo();
+  try {
+    start_episode(start, start_edge, options.traffic_seed, options.density);
+  } catch (const SumoError& e) {
+    // A SUMO that died between episodes (libtraci) fails here first: one restart, then retry.
+    INDRIVE_LOG(kWarn, "env") << "SUMO failed starting an episode on town " << town_->name << ": "
+                              << e.what() << "; restarting SUMO";
+    ++env_faults_;
+    restart_sumo();
+    start_episode(start, start_edge, options.traffic_seed, options.density);
   }
-  sumo_->add_ego(kEgoId, start_edge, ego_route);
-  sumo_->place_ego(kEgoId, ego_.pose, 0.0);
-  traffic_->reset(options.density, options.traffic_seed, ego_.pose);
-  sumo_->step();  // inserts the ego and the first traffic
-  read_vehicles();
   events_->reset(route_);  // off_route only on a route
   step_ = 0;
   running_ = true;
@@ -111,6 +105,53 @@ StepResult Env::reset(const ResetOptions& options) {
   return result;
 }
 
+void Env::start_episode(const Pose2& start, const std::string& start_edge, std::uint64_t seed,
+                        int density) {
+  // A fresh simulation per episode: the same seeds give the same episode.
+  sumo_->load(town_->net_file, seed);
+  ego_ = EgoState{.pose = start};
+  // On a route SUMO gets the ego's path (a loop three laps over, more than any budget lets it
+  // drive), so traffic at junctions yields to it as to any vehicle on the major road.
+  std::vector<std::string> ego_route;
+  if (route_ != nullptr) {
+    const int laps = route_->is_loop() ? 3 : 1;
+    for (int lap = 0; lap < laps; ++lap) {
+      ego_route.insert(ego_route.end(), route_->spec().edges.begin(), route_->spec().edges.end());
+    }
+  }
+  sumo_->add_ego(kEgoId, start_edge, ego_route);
+  sumo_->place_ego(kEgoId, ego_.pose, 0.0);
+  traffic_->reset(density, seed, ego_.pose);
+  sumo_->step();  // inserts the ego and the first traffic
+  read_vehicles();
+}
+
+void Env::restart_sumo() {
+  traffic_.reset();  // it drives the old connection
+  sumo_.reset();     // closes it (in libsumo mode also gives back the process's one simulation)
+  sumo_ = make_sumo_connection(config_.sumo);
+  traffic_ = std::make_unique<TrafficManager>(*sumo_, town_->net, town_->spawns, config_.traffic);
+  sumo_failed_ = false;
+}
+
+StepResult Env::fault(const SumoError& error) {
+  INDRIVE_LOG(kWarn, "env") << "SUMO failed at step " << step_ << " on town " << town_->name
+                            << (route_ != nullptr ? " route " + route_->name() : std::string())
+                            << ": " << error.what()
+                            << "; the episode ends as env_fault and SUMO restarts";
+  ++env_faults_;
+  sumo_failed_ = true;
+  running_ = false;
+  StepResult result;
+  result.observation = observation_;
+  result.step = step_;
+  result.ego = ego_;
+  result.events = kEnvFault;
+  result.is_last = true;
+  result.is_terminal = false;
+  return result;
+}
+
 StepResult Env::step(int action) {
   INDRIVE_CHECK(running_) << "step() before reset() or after the episode ended";
   Stopwatch watch;
@@ -118,18 +159,22 @@ StepResult Env::step(int action) {
   // Ego dynamics, mirrored into SUMO, then the traffic reacts.
   ego_ = model_.step(ego_, decode_action(action));
   ++step_;
-  sumo_->place_ego(kEgoId, ego_.pose, ego_.speed_mps);
-  sumo_->step();
-  read_vehicles();
-  watch.lap(timing_.sumo_s);
-  traffic_->update(ego_.pose, vehicles_);
-  watch.lap(timing_.traffic_s);
+  bool sumo_collision = false;
+  try {
+    sumo_->place_ego(kEgoId, ego_.pose, ego_.speed_mps);
+    sumo_->step();
+    read_vehicles();
+    watch.lap(timing_.sumo_s);
+    traffic_->update(ego_.pose, vehicles_);
+    watch.lap(timing_.traffic_s);
+    for (const SumoCollision& c : sumo_->collisions()) {
+      sumo_collision = sumo_collision || c.collider == kEgoId || c.victim == kEgoId;
+    }
+  } catch (const SumoError& e) {
+    return fault(e);
+  }
 
   // Events, route progress, reward.
-  bool sumo_collision = false;
-  for (const SumoCollision& c : sumo_->collisions()) {
-    sumo_collision = sumo_collision || c.collider == kEgoId || c.victim == kEgoId;
-  }
   RouteStep progress;
   if (tracker_) progress = tracker_->update(ego_.pose);
   StepResult result;

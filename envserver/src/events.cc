@@ -57,6 +57,8 @@ const char* event_name(EventBit bit) {
       return "out_of_lane";
     case kTooSlow:
       return "too_slow";
+    case kEnvFault:
+      return "env_fault";
   }
   return "unknown";
 }

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <csignal>
 #include <sstream>
 #include <unordered_map>
 #include <unordered_set>
@@ -23,6 +24,9 @@ std::atomic<int> g_next_label{0};
 }  // namespace
 
 void LibtraciConnection::start(const std::vector<std::string>& args) {
+  // A SUMO that died leaves a closed socket, and writing to it would end this process with
+  // SIGPIPE; ignored, the write fails, the call throws and the episode ends as env_fault.
+  std::signal(SIGPIPE, SIG_IGN);
   std::vector<std::string> command{config_.sumo_binary.string()};
   command.insert(command.end(), args.begin(), args.end());
   // Each connection has its own label, so several simulations can live in one process.
@@ -40,6 +44,8 @@ void LibtraciConnection::select() {
 }
 
 void LibtraciConnection::release() {}
+
+void LibtraciConnection::loading(const std::vector<std::string>&) {}
 
 std::unique_ptr<SumoConnection> make_libtraci_connection(const SumoConfig& config) {
   return std::make_unique<LibtraciConnection>(config);

@@ -35,6 +35,7 @@ std::string EvaluationTally::key_of(const std::string& town) {
 }
 
 void EvaluationTally::add(const msg::EpisodeResult& result) {
+  if (result.failure_reason() == "env_fault") return;  // SUMO failed: nothing of the policy
   const double raw = result.route_completion();
   const double completion = std::isfinite(raw) ? std::clamp(raw, 0.0, 1.0) : 0.0;
   std::lock_guard<std::mutex> lock(mutex_);

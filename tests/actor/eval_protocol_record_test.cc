@@ -102,6 +102,10 @@ TEST(ProtocolRecord, ProtocolRecordSucceedsOnlyAtTheDestinationWithoutFailures) 
   const EpisodeRecord strayed = protocol_record(spec, env::kOffRoute, 300, 0.2, 0.0);
   EXPECT_FALSE(strayed.success);
   EXPECT_EQ(strayed.failure_reason, "off_route");
+  // An episode SUMO failed in is named env_fault, so that reports can leave it out.
+  const EpisodeRecord faulted = protocol_record(spec, env::kEnvFault, 120, 0.1, 0.0);
+  EXPECT_FALSE(faulted.success);
+  EXPECT_EQ(faulted.failure_reason, "env_fault");
 }
 
 // A training episode's row: on a route the protocol's verdict and completion; without one

@@ -54,6 +54,21 @@ TEST(Report, AveragesUniformlyOverDensitiesThenSeeds) {
   EXPECT_EQ(table.failures.at("disag").at("town01").at("straight").at("collision"), 4);
 }
 
+// Episodes SUMO failed in say nothing of the policy: counted, and left out of every cell.
+TEST(Report, EnvFaultEpisodesAreCountedApartFromTheCells) {
+  std::vector<EpisodeRecord> records;
+  add_episodes(records, "disag", 0, "town01", "straight", 5, 4, 3);
+  add_episodes(records, "disag", 0, "town01", "straight", 5, 2, 0, "env_fault");
+  const Report report = aggregate(records);
+  EXPECT_EQ(report.episodes, 6);
+  EXPECT_EQ(report.env_faults, 2);
+  const Table& table = report.tables.at({"strict", "zero_shot", "exploration"});
+  const CellStats& cell = table.cells.at("disag").at("town01").at("straight");
+  EXPECT_EQ(cell.episodes, 4);
+  EXPECT_DOUBLE_EQ(cell.sr, 75.0);
+  EXPECT_EQ(table.failures.at("disag").at("town01").at("straight").count("env_fault"), 0u);
+}
+
 TEST(Report, WilsonIntervalMatchesTheFormula) {
   // 8 of 10: centre (0.8 + 1.92/10) / 1.384 = 0.7168, half 0.2271 -> [49.0, 94.3] %.
   const auto [low, high] = wilson_interval(8, 10);

@@ -1,9 +1,14 @@
 #include "indrive/envserver/env.h"
 
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <random>
+#include <sstream>
 #include <vector>
 
 #include "indrive/basics/checksum.h"
@@ -24,6 +29,24 @@ Env& shared_env() {
     return std::make_unique<Env>(config);
   }();
   return *env;
+}
+
+// The SUMO processes whose command line holds `tag` (libtraci starts SUMO in the background,
+// so it is no descendant of this process; the tag tells it from other tests' SUMOs).
+std::vector<pid_t> sumo_processes(const std::string& tag) {
+  namespace fs = std::filesystem;
+  std::vector<pid_t> found;
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator("/proc", error)) {
+    const std::string name = entry.path().filename().string();
+    if (name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream in(entry.path() / "cmdline");
+    const std::string cmdline((std::istreambuf_iterator<char>(in)), {});
+    if (cmdline.find("sumo") != std::string::npos && cmdline.find(tag) != std::string::npos) {
+      found.push_back(std::stoi(name));
+    }
+  }
+  return found;
 }
 
 std::uint32_t crc_of(const cv::Mat& image) {
@@ -207,6 +230,48 @@ TEST(Env, BadInputIsNamed) {
   }
   // The env still works after the failed resets.
   EXPECT_NO_THROW(env.reset({.route = "straight", .density = 5}));
+}
+
+// SUMO dying mid-episode (here killed; on a user's map, SUMO's own assertion) ends that
+// episode as env_fault, not as a failure of the policy; the next episode runs on a new SUMO.
+// libtraci, where SUMO is a child process, is the mode in which a SUMO abort can be survived.
+TEST(Env, ASumoThatDiesMidEpisodeEndsItAsEnvFaultAndTheNextEpisodeRuns) {
+  EnvConfig config;
+  config.town = "town02";
+  config.sumo.mode = SumoMode::kLibtraci;  // the shared Env holds libsumo
+  config.camera.width = 32;
+  config.camera.height = 32;
+  const std::string tag = "envfault" + std::to_string(::getpid());
+  config.sumo.extra_args = {"--output-prefix", tag};  // names this test's SUMO; writes nothing
+  Env env(config);
+  StepResult r = env.reset({.route = "straight", .density = 5, .traffic_seed = 3});
+  WaypointFollower follower(*env.route(), config.ego, {.target_speed_mps = 5.0});
+  follower.reset();
+  for (int i = 0; i < 20; ++i) ASSERT_FALSE(env.step(follower.act(env.ego())).is_last);
+  const auto sumo = sumo_processes(tag);
+  ASSERT_EQ(sumo.size(), 1u) << "expected one SUMO process with " << tag << " in its arguments";
+  ASSERT_EQ(::kill(sumo[0], SIGKILL), 0);
+  r = env.step(follower.act(env.ego()));
+  EXPECT_TRUE(r.is_last);
+  EXPECT_FALSE(r.is_terminal);
+  EXPECT_EQ(r.events, kEnvFault);
+  EXPECT_EQ(r.step, 21);
+  EXPECT_EQ(env.env_faults(), 1);
+
+  // The next episode runs on a new SUMO, the same as a fresh Env's.
+  r = env.reset({.route = "straight", .density = 5, .traffic_seed = 3});
+  follower.reset();
+  int steps = 0;
+  for (; steps < 60 && !r.is_last; ++steps) r = env.step(follower.act(env.ego()));
+  EXPECT_EQ(steps, 60) << event_names(r.events);
+  EXPECT_EQ(env.traffic_count(), 5);
+  EXPECT_EQ(env.env_faults(), 1);
+
+  // A SUMO that died between episodes is restarted by the reset.
+  for (pid_t pid : sumo_processes(tag)) ::kill(pid, SIGKILL);
+  r = env.reset({.route = "straight", .density = 5, .traffic_seed = 3});
+  EXPECT_EQ(env.env_faults(), 2);
+  EXPECT_FALSE(env.step(follower.act(env.ego())).is_last);
 }
 
 }  // namespace

@@ -440,6 +440,11 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
     record.train_seed = static_cast<int>(learner::learner_config(config.config()).seed);
     record.policy_version = version;
     csv.write(record);
+    if (record.failure_reason == "env_fault") {  // SUMO failed: nothing of the policy
+      INDRIVE_LOG(kWarn, "local") << "episode at density " << spec.density
+                                  << " ended by a SUMO fault; not counted";
+      continue;
+    }
     ++summary.episodes;
     summary.successes += record.success ? 1 : 0;
     completion_sum += record.route_completion;

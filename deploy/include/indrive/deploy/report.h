@@ -64,6 +64,9 @@ struct Table {
 struct Report {
   std::map<TableKey, Table> tables;
   int episodes = 0;
+  // Of those, episodes SUMO failed in (failure_reason env_fault): left out of every cell, as
+  // they say nothing of the policy.
+  int env_faults = 0;
   std::vector<std::string> runs;
 };
 

@@ -86,7 +86,10 @@ class Env {
 
   // Starts an episode; throws EnvError for a bad density, RouteError for an unknown route.
   StepResult reset(const ResetOptions& options);
-  // Applies action in [0, 9) for one step; INDRIVE_CHECKs that an episode is running.
+  // Applies action in [0, 9) for one step; INDRIVE_CHECKs that an episode is running. A SUMO
+  // failure (SumoError: in libtraci mode also a SUMO process that died) ends the episode with
+  // kEnvFault alone, logged with the town and SUMO's message; the next reset() starts a new
+  // SUMO. A SUMO failure inside reset() restarts SUMO once and retries before it throws.
   StepResult step(int action);
 
   const Town& town() const { return *town_; }
@@ -101,9 +104,18 @@ class Env {
   const EnvTiming& timing() const { return timing_; }
   const EnvConfig& config() const { return config_; }
   int traffic_count() const { return static_cast<int>(boxes_.size()); }
+  // Episodes SUMO failed in (kEnvFault) and SUMO restarts since construction.
+  int env_faults() const { return env_faults_; }
 
  private:
   void load_town(const std::string& spec);
+  // Starts SUMO for an episode: a fresh simulation, the ego placed and the first traffic in.
+  void start_episode(const Pose2& start, const std::string& start_edge, std::uint64_t seed,
+                     int density);
+  // A new SUMO connection (and the traffic manager that drives it) after a failure.
+  void restart_sumo();
+  // Ends the running episode after a SUMO failure (see step()).
+  StepResult fault(const SumoError& error);
   void read_vehicles();
   void render();
 
@@ -124,6 +136,8 @@ class Env {
   cv::Mat observation_;
   int step_ = 0;
   bool running_ = false;
+  bool sumo_failed_ = false;  // restart SUMO before the next episode
+  int env_faults_ = 0;
   EnvTiming timing_;
 };
 

@@ -66,8 +66,12 @@ enum EventBit : std::uint32_t {
   kOffRoute = 1u << 7,
   kOutOfLane = 1u << 8,  // the public InDRiVE code's rules only
   kTooSlow = 1u << 9,    // the public InDRiVE code's rules only
+  // SUMO failed mid-episode (Env::step caught its error; the simulation is restarted at the
+  // next reset). Neither a failure of the policy nor terminal: the episode is cut short, and
+  // evaluations count it apart from the policy's episodes.
+  kEnvFault = 1u << 10,
 };
-inline constexpr int kNumEvents = 10;
+inline constexpr int kNumEvents = 11;
 inline constexpr std::uint32_t kFailureEvents = kCollision | kLaneInvasion | kWrongDirection |
                                                 kOffRoad | kStall | kTimeLimit | kOffRoute |
                                                 kOutOfLane | kTooSlow;
