@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <random>
 #include <sstream>
 
@@ -17,6 +18,8 @@
 #include "indrive/basics/child_signals.h"
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
+#include "indrive/envserver/net.h"
+#include "indrive/envserver/route_check.h"
 #include "indrive/envserver/town.h"
 
 extern char** environ;
@@ -119,11 +122,60 @@ std::string tail_of(const fs::path& log_path, size_t max_chars = 1500) {
   return all;
 }
 
+// A normal edge shorter than this is one the ego can pass within one 0.1 s step, and SUMO's
+// placement of an externally moved vehicle (moveToXY on its route) then skips it and leaves
+// the vehicle on a lane its route position does not know: SUMO's sublane model asserts and
+// aborts the process (CARLA's Town07 has 26 such 0.2 m edges; CARLA's Town01 and Town02
+// none). Converting a map given by path joins the two junctions of each such edge into one.
+constexpr double kShortEdgeM = 1.0;
+
+// Writes a netconvert node file joining the junctions at both ends of every normal edge of
+// `net` shorter than kShortEdgeM (chains of them into one junction); returns how many edges
+// were short (0: nothing written). An empty `out` only counts.
+int write_short_edge_joins(const fs::path& net, const fs::path& out) {
+  const RoadNetwork network = RoadNetwork::load(net);
+  std::map<std::string, std::string> parent;
+  const auto root = [&](std::string id) {
+    if (!parent.count(id)) parent[id] = id;
+    while (parent[id] != id) id = parent[id];
+    return id;
+  };
+  int short_edges = 0;
+  for (const Edge& edge : network.edges()) {
+    if (edge.internal || edge.from_junction.empty() || edge.to_junction.empty()) continue;
+    double longest = 0.0;
+    for (int lane : edge.lanes) longest = std::max(longest, network.lane(lane).length_m);
+    if (longest >= kShortEdgeM) continue;
+    ++short_edges;
+    parent[root(edge.from_junction)] = root(edge.to_junction);
+  }
+  if (short_edges == 0 || out.empty()) return short_edges;
+  std::map<std::string, std::vector<std::string>> groups;
+  for (const auto& [id, up] : parent) groups[root(id)].push_back(id);
+  std::ofstream file(out);
+  file << "<nodes>\n";
+  for (const auto& [group_root, ids] : groups) {
+    file << "  <join nodes=\"";
+    for (std::size_t i = 0; i < ids.size(); ++i) file << (i > 0 ? " " : "") << ids[i];
+    file << "\"/>\n";
+  }
+  file << "</nodes>\n";
+  if (!file) throw MapError("cannot write '" + out.string() + "'");
+  return short_edges;
+}
+
 // Builds `output` with `argv` + ["-o", tmp] unless a file with the same content hash exists;
-// the hash covers the inputs' bytes and the arguments. Safe when several processes race.
+// the hash covers the inputs' bytes and the arguments. With join_short_edges, a second
+// netconvert pass joins away edges shorter than kShortEdgeM (write_short_edge_joins). Safe
+// when several processes race.
 fs::path convert_cached(const std::string& stem, const std::vector<fs::path>& inputs,
-                        std::vector<std::string> argv, const TownOptions& options) {
+                        std::vector<std::string> argv, const TownOptions& options,
+                        bool join_short_edges = false) {
   std::uint32_t hash = indrive::crc32(kCacheVersion, std::char_traits<char>::length(kCacheVersion));
+  if (join_short_edges) {
+    const std::string pass = "join-short-edges-1m";
+    hash = indrive::crc32(pass.data(), pass.size() + 1, hash);
+  }
   for (const auto& input : inputs) {
     const std::string bytes = read_file(input);
     hash = indrive::crc32(bytes.data(), bytes.size(), hash);
@@ -164,6 +216,33 @@ fs::path convert_cached(const std::string& stem, const std::vector<fs::path>& in
     }
     throw MapError("'" + argv[0] + "' failed to convert " + stem + " (exit " +
                    std::to_string(status) + "): " + log);
+  }
+  if (join_short_edges) {
+    const fs::path joins = dir / (stem + "-" + hex + "." + token + ".join.nod.xml");
+    const int short_edges = write_short_edge_joins(temporary, joins);
+    if (short_edges > 0) {
+      const fs::path joined = dir / (stem + "-" + hex + "." + token + ".joined.net.xml");
+      std::vector<std::string> pass = {argv[0], "--sumo-net-file", temporary.string(),
+                                       "--node-files", joins.string()};
+      pass.insert(pass.end(), kCommonOptions.begin(), kCommonOptions.end());
+      pass.insert(pass.end(), {"-o", joined.string()});
+      INDRIVE_LOG(kInfo, "env") << stem << ": joining the junctions at " << short_edges
+                                << " edge(s) shorter than " << kShortEdgeM
+                                << " m (SUMO cannot place the ego across them)";
+      const int joined_status = run_program(pass, log_path);
+      fs::remove(joins, ec);
+      if (joined_status != 0 || !fs::is_regular_file(joined, ec)) {
+        const std::string log = tail_of(log_path);
+        fs::remove(temporary, ec);
+        fs::remove(joined, ec);
+        fs::remove(log_path, ec);
+        throw MapError("'" + argv[0] + "' failed to join the short edges of " + stem + " (exit " +
+                       std::to_string(joined_status) + "): " + log);
+      }
+      fs::rename(joined, temporary, ec);
+    } else {
+      fs::remove(joins, ec);
+    }
   }
   fs::remove(log_path, ec);
   fs::rename(temporary, output, ec);
@@ -272,7 +351,12 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
     if (!fs::is_regular_file(path, ec)) {
       throw MapError("road network file '" + spec + "' does not exist; give " + known_specs());
     }
-    return path;
+    if (write_short_edge_joins(path, {}) == 0) return path;
+    // Edges too short to place the ego across (kShortEdgeM): a cached copy with them joined.
+    std::vector<std::string> argv = {netconvert.string(), "--sumo-net-file", path.string()};
+    argv.insert(argv.end(), kCommonOptions.begin(), kCommonOptions.end());
+    return convert_cached(path.stem().stem().string(), {path}, argv, options,
+                          /*join_short_edges=*/true);
   }
   if (ends_with(spec, ".xodr")) {
     if (!fs::is_regular_file(path, ec)) {
@@ -280,7 +364,7 @@ fs::path resolve_town_network(const std::string& spec, const TownOptions& option
     }
     std::vector<std::string> argv = {netconvert.string(), "--opendrive-files", path.string()};
     argv.insert(argv.end(), kCommonOptions.begin(), kCommonOptions.end());
-    return convert_cached(path.stem().string(), {path}, argv, options);
+    return convert_cached(path.stem().string(), {path}, argv, options, /*join_short_edges=*/true);
   }
   throw MapError("unknown town '" + spec + "'; give " + known_specs());
 }
@@ -312,18 +396,88 @@ std::vector<std::string> town_route_names(const std::string& spec, const TownOpt
   return names;
 }
 
+namespace {
+
+// Derived routes, each one the scripted follower drives (oracle_drive_failure()), cached
+// beside the converted networks under the network's content hash: the check costs once per
+// map. Returns the specs; `dropped` gets one line per candidate the check refused.
+std::vector<RouteSpec> checked_derived_routes(const RoadNetwork& net, const fs::path& net_file,
+                                              const TownOptions& options,
+                                              std::vector<std::string>& dropped) {
+  constexpr const char* kRoutesVersion = "routes-v1";
+  const std::string bytes = read_file(net_file);
+  std::uint32_t hash =
+      indrive::crc32(kRoutesVersion, std::char_traits<char>::length(kRoutesVersion));
+  hash = indrive::crc32(bytes.data(), bytes.size(), hash);
+  char hex[9];
+  std::snprintf(hex, sizeof hex, "%08x", hash);
+  const fs::path dir = cache_dir(options);
+  const std::string stem = net_file.stem().stem().string() + "-" + hex;
+  const fs::path routes_file = dir / (stem + ".routes.yaml");
+  const fs::path dropped_file = dir / (stem + ".dropped.txt");
+  std::error_code ec;
+  if (fs::is_regular_file(routes_file, ec) && fs::is_regular_file(dropped_file, ec)) {
+    std::ifstream in(dropped_file);
+    for (std::string line; std::getline(in, line);) {
+      if (!line.empty()) dropped.push_back(line);
+    }
+    return read_route_file(routes_file);
+  }
+  std::vector<DroppedRoute> refused;
+  std::vector<RouteSpec> specs = derive_routes(
+      net, [&](const RouteSpec& spec) { return oracle_drive_failure(net, spec); }, &refused);
+  for (const DroppedRoute& route : refused) {
+    std::string line = route.spec.name + " candidate (";
+    for (std::size_t i = 0; i < route.spec.edges.size(); ++i) {
+      line += (i > 0 ? " " : "") + route.spec.edges[i];
+    }
+    dropped.push_back(line + "): " + route.reason);
+  }
+  if (!refused.empty()) {
+    INDRIVE_LOG(kInfo, "env") << net_file.filename().string() << ": " << refused.size()
+                              << " derived route candidate(s) the scripted follower cannot drive "
+                                 "were dropped (indrive-env routes lists them)";
+  }
+  // Written under unique names and renamed into place, as the networks are.
+  fs::create_directories(dir, ec);
+  std::random_device random;
+  const std::string token = std::to_string(::getpid()) + "-" + std::to_string(random() % 100000);
+  const fs::path routes_tmp = dir / (stem + "." + token + ".routes.yaml");
+  const fs::path dropped_tmp = dir / (stem + "." + token + ".dropped.txt");
+  try {
+    write_route_file(routes_tmp, specs);
+    std::ofstream out(dropped_tmp);
+    for (const std::string& line : dropped) out << line << '\n';
+    out.close();
+    if (!out) throw RouteError("cannot write '" + dropped_tmp.string() + "'");
+    fs::rename(dropped_tmp, dropped_file, ec);
+    fs::rename(routes_tmp, routes_file, ec);
+  } catch (const std::exception& error) {
+    // The cache is an optimisation: without it the check runs again next time.
+    INDRIVE_LOG(kWarn, "env") << "could not cache the checked routes in " << dir << ": "
+                              << error.what();
+  }
+  fs::remove(routes_tmp, ec);
+  fs::remove(dropped_tmp, ec);
+  return specs;
+}
+
+}  // namespace
+
 Town load_town(const std::string& spec, const TownOptions& options) {
   const fs::path net_file = resolve_town_network(spec, options);
   RoadNetwork net = RoadNetwork::load(net_file);
   std::vector<RouteSpec> specs;
+  std::vector<std::string> dropped;
   if (is_builtin_town(spec)) {
     specs = read_route_file(builtin_route_file(spec, options));
   } else {
-    specs = derive_routes(net);
+    specs = checked_derived_routes(net, net_file, options, dropped);
   }
   std::vector<Route> routes = build_routes(net, specs);
   std::vector<SpawnPoint> spawns = spawn_points(net);
-  return Town{spec, net_file, std::move(net), std::move(routes), std::move(spawns)};
+  return Town{
+      spec, net_file, std::move(net), std::move(routes), std::move(spawns), std::move(dropped)};
 }
 
 }  // namespace indrive::env

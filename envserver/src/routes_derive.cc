@@ -280,9 +280,10 @@ RouteSpec to_spec(const RoadNetwork& net, std::string name, bool loop,
 
 }  // namespace
 
-std::vector<RouteSpec> derive_routes(const RoadNetwork& net) {
+std::vector<RouteSpec> derive_routes(const RoadNetwork& net, const RouteFilter& usable,
+                                     std::vector<DroppedRoute>* dropped) {
   const EdgeGraph graph = make_graph(net);
-  const std::vector<std::vector<Candidate>> candidates = {
+  std::vector<std::vector<Candidate>> candidates = {
       straight_candidates(net, graph), loop_candidates(net, graph, true, false, 0),
       loop_candidates(net, graph, false, true, 0), loop_candidates(net, graph, true, true, 3)};
   std::string missing;
@@ -296,6 +297,38 @@ std::vector<RouteSpec> derive_routes(const RoadNetwork& net) {
     throw RouteError("network '" + net.source().string() + "' allows no route for:" + missing +
                      "; use a network with closed blocks (loops need a ring of junctions) or "
                      "write a route file");
+  }
+  if (usable) {
+    // Only candidates that pass, in rank order, up to the number the set search considers.
+    std::string none_usable;
+    for (size_t kind = 0; kind < candidates.size(); ++kind) {
+      std::vector<Candidate> kept;
+      std::string first_reason;
+      for (const Candidate& candidate : candidates[kind]) {
+        if (kept.size() == kCandidatesPerKind) break;
+        const RouteSpec spec =
+            to_spec(net, std::string(kRouteNames[kind]), kind > 0, candidate.edges);
+        std::string reason = usable(spec);
+        if (reason.empty()) {
+          kept.push_back(candidate);
+          continue;
+        }
+        if (first_reason.empty()) first_reason = reason;
+        if (dropped != nullptr) dropped->push_back({spec, std::move(reason)});
+      }
+      if (kept.empty()) {
+        none_usable += std::string(none_usable.empty() ? "" : "; ") +
+                       std::string(kRouteNames[kind]) + " (" +
+                       std::to_string(candidates[kind].size()) +
+                       " candidates, the first: " + first_reason + ")";
+      }
+      candidates[kind] = std::move(kept);
+    }
+    if (!none_usable.empty()) {
+      throw RouteError("network '" + net.source().string() +
+                       "' has no route the scripted follower can drive for: " + none_usable +
+                       "; write a route file for it");
+    }
   }
   // The set a route-blind policy can follow best: among the conflict-free sets of candidates
   // (the first kCandidatesPerKind of each kind in rank order), one with the highest layout

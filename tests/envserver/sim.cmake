@@ -23,3 +23,12 @@ indrive_test(traffic_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/traffic_test.cc
 foreach(target sumo_test ego_test events_test env_test follower_test traffic_test env_bench)
   target_compile_options(${target} PRIVATE -Wno-missing-field-initializers)
 endforeach()
+
+indrive_test(route_check_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/route_check_test.cc
+  LIBS indrive::envserver)
+# Public maps from tests/data/maps: conversion, route checks, SUMO; about a minute.
+indrive_test(maps_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/maps_test.cc LIBS indrive::envserver
+  LABEL maps TIMEOUT 900)
+foreach(target route_check_test maps_test)
+  target_compile_options(${target} PRIVATE -Wno-missing-field-initializers)
+endforeach()

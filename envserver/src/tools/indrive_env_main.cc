@@ -108,6 +108,12 @@ int run_routes(std::map<std::string, std::string> flags) {
                 route.length_m(), route.is_loop() ? "loop" : "point to point", turns,
                 route.turns().size());
   }
+  // Derived routes keep only candidates the scripted follower drives (route_check.h).
+  if (!town.dropped_routes.empty()) {
+    std::printf("dropped %zu derived candidate(s) the scripted follower cannot drive alone:\n",
+                town.dropped_routes.size());
+    for (const std::string& line : town.dropped_routes) std::printf("  %s\n", line.c_str());
+  }
   // A policy that sees no route cannot leave one approach by two exits (see routes.h).
   const std::vector<RouteConflict> conflicts = route_conflicts(town.routes);
   if (conflicts.empty()) {

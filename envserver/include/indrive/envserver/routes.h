@@ -19,6 +19,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <optional>
 #include <stdexcept>
@@ -227,7 +228,18 @@ void write_route_file(const std::filesystem::path& path, const std::vector<Route
 // is highest, the first in rank order among equals, so a policy that sees no route can follow
 // as many as the network allows; the best candidate of each kind when no set is conflict-free.
 // Throws RouteError naming the route kinds the network does not allow.
-std::vector<RouteSpec> derive_routes(const RoadNetwork& net);
+//
+// With `usable`, a candidate is considered only if usable(spec) returns "" (otherwise the
+// reason it is not, e.g. oracle_drive_failure()); candidates are tried in rank order until 48
+// of a kind pass, and those that failed go to `dropped` with their reasons. A kind none of
+// whose candidates passes is named in the RouteError with the first reasons.
+using RouteFilter = std::function<std::string(const RouteSpec&)>;
+struct DroppedRoute {
+  RouteSpec spec;
+  std::string reason;
+};
+std::vector<RouteSpec> derive_routes(const RoadNetwork& net, const RouteFilter& usable = {},
+                                     std::vector<DroppedRoute>* dropped = nullptr);
 // Builds a Route per spec; throws RouteError when a spec does not fit the network.
 std::vector<Route> build_routes(const RoadNetwork& net, const std::vector<RouteSpec>& specs);
 // Returns the route called `name`; throws RouteError listing the known names otherwise.

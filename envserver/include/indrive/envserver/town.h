@@ -73,10 +73,15 @@ struct Town {
   RoadNetwork net;
   std::vector<Route> routes;  // in file order (kRouteNames order for our towns and derived ones)
   std::vector<SpawnPoint> spawns;
+  // Derived towns only: the route candidates the scripted follower could not drive, each as
+  // "<kind> candidate (<edges>): <why>" (route_check.h).
+  std::vector<std::string> dropped_routes;
 };
 
 // Resolves, parses and prepares a town: built-in towns read their shipped route file, others
-// derive their routes from the network. Throws MapError or RouteError.
+// derive their routes from the network, keeping only routes the scripted follower drives
+// alone (route_check.h; the result is cached with the converted networks). Throws MapError or
+// RouteError.
 Town load_town(const std::string& spec, const TownOptions& options = {});
 
 // The route names of a town without loading its network: a built-in town's from its route
