@@ -15,6 +15,7 @@
 #include "indrive/agent/policy.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/log.h"
+#include "indrive/basics/stopwatch.h"
 #include "indrive/dds/participant.h"
 #include "indrive/dds/security.h"
 #include "indrive/envserver/coverage.h"
@@ -24,10 +25,6 @@ namespace indrive::actor {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 double unix_time_s() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();

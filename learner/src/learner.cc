@@ -14,6 +14,7 @@
 #include "indrive/basics/episode_csv.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
+#include "indrive/basics/stopwatch.h"
 #include "indrive/dds/participant.h"
 #include "indrive/dds/security.h"
 #include "indrive/dds/shm_sweeper.h"
@@ -32,10 +33,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 // Policy versions reserved before they are published (VersionReservation).
 constexpr std::string_view kVersionReserveFile = "policy_versions_reserved";
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 double unix_time_s() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <optional>
 
+#include "indrive/basics/stopwatch.h"
 #include "indrive/envserver/env.h"
 #include "indrive/envserver/follower.h"
 #include "indrive/envserver/route_check.h"
@@ -20,10 +21,6 @@ namespace indrive::env {
 namespace {
 
 namespace fs = std::filesystem;
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 TEST(Maps, EachPublicMapLoadsOrIsRefusedByNameAndTheFollowerDrivesEveryRouteOffered) {
   testing::TempDir dir("indrive-maps");

@@ -5,15 +5,13 @@
 #include <cstdio>
 #include <random>
 
+#include "indrive/basics/stopwatch.h"
 #include "indrive/envserver/town.h"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
+using indrive::seconds_since;
 
 }  // namespace
 

@@ -27,10 +27,6 @@ bool wait_until(std::chrono::milliseconds timeout, const std::function<bool()>& 
   return true;
 }
 
-double seconds_since(SteadyClock::time_point start) {
-  return std::chrono::duration<double>(SteadyClock::now() - start).count();
-}
-
 std::vector<nlohmann::json> read_metrics(const fs::path& path) {
   std::vector<nlohmann::json> records;
   std::ifstream in(path);

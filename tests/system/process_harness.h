@@ -22,17 +22,16 @@
 #include <vector>
 
 #include "child_process.h"
+#include "indrive/basics/stopwatch.h"
 #include "indrive/dds/participant.h"
 
 namespace indrive::testing {
 
-using SteadyClock = std::chrono::steady_clock;
+using indrive::seconds_since;
+using indrive::SteadyClock;
 
 // Polls `condition` every 50 ms until it holds or `timeout` passes; returns its last value.
 bool wait_until(std::chrono::milliseconds timeout, const std::function<bool()>& condition);
-
-// Seconds since `start`.
-double seconds_since(SteadyClock::time_point start);
 
 // Every line of a metrics.jsonl file, parsed, in order (lines that do not parse are skipped:
 // a killed learner may leave a partial last line).

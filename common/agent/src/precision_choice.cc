@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "indrive/agent/agent.h"
+#include "indrive/basics/stopwatch.h"
 #include "indrive/nn/tensor.h"
 
 namespace indrive::agent {
@@ -17,10 +18,6 @@ namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 std::string cpu_model() {
   std::ifstream in("/proc/cpuinfo");

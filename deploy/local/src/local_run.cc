@@ -19,6 +19,7 @@
 #include "indrive/basics/episode_csv.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
+#include "indrive/basics/stopwatch.h"
 #include "indrive/envserver/town.h"
 #include "indrive/learner/learner.h"
 #include "indrive/learner/learner_config.h"
@@ -30,10 +31,6 @@ namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 RunDir open_run(const service::ServiceConfig& config) {
   return RunDir::open_or_create(

@@ -36,12 +36,14 @@
 #include <thread>
 
 #include "indrive/basics/log.h"
+#include "indrive/basics/stopwatch.h"
 #include "indrive/dds/participant.h"
 #include "synthetic_traffic.h"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
+using indrive::seconds_since;
 using indrive::dds::DropReason;
 
 struct Args {
@@ -92,10 +94,6 @@ indrive::dds::ParticipantOptions participant_options(const Args& args) {
           .profiles_file = args.profiles,
           .security_dir = args.security,
           .security_role = args.role};
-}
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
 // The four malformed chunks the publisher sends; the receiver must count one of each.

@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "indrive/basics/stopwatch.h"
 #include "indrive/nn/kernels.h"
 #include "indrive/nn/nn.h"
 
@@ -33,10 +34,7 @@ namespace {
 
 using namespace indrive::nn;
 using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using indrive::seconds_since;
 
 // CPU seconds used by the whole process (all threads): on a shared machine this shows the
 // work done, while wall time also shows waiting for a core.
