@@ -12,11 +12,9 @@ namespace indrive::agent {
 using nn::Shape;
 using nn::Tensor;
 
-namespace {
-
 // Seconds since the last call (or construction), and the product FLOPs in that time
 // (nn::gemm_flops, into *flops): one stage of an update at a time.
-class StageClock {
+class Agent::StageClock {
  public:
   double lap(double* flops) {
     const auto now = std::chrono::steady_clock::now();
@@ -31,7 +29,6 @@ class StageClock {
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
   std::uint64_t flops_ = nn::gemm_flops();
 };
-}  // namespace
 
 TrainMetrics StepTiming::as_metrics() const {
   auto f = [](double s) { return static_cast<float>(s); };
@@ -80,33 +77,32 @@ std::string Agent::acting_actor_group() const {
                                            : task_->actor_params().name();
 }
 
-TrainMetrics Agent::train_step(const SequenceBatch& batch) {
+void Agent::check_batch(const SequenceBatch& batch) const {
   const Phase phase = config_.phase;
-  const bool task_phase = phase != Phase::kPretrain;
-  if (!task_phase && !batch.rewards.empty()) {
+  if (phase == Phase::kPretrain && !batch.rewards.empty()) {
     throw AgentError(
         "a pretraining batch carries rewards; pretraining must be reward-free "
         "(make the replay buffer with has_rewards = false)");
   }
-  if (task_phase && batch.rewards.empty()) {
+  if (phase != Phase::kPretrain && batch.rewards.empty()) {
     throw AgentError(std::string("a ") + std::string(to_string(phase)) +
                      " batch has no rewards; task phases need a replay buffer with rewards");
   }
-  StageClock clock;
-  timing_ = {};
-  flops_ = {};
-  nn::Graph& graph = nn::current_graph();
-  graph.reset();
-  TrainMetrics metrics;
-  const int b = batch.batch, t = batch.length;
+}
 
-  // World model: trained in pretrain and dreamer, a frozen feature extractor in finetune
-  // (unless agent.finetune_world_model trains it there too).
-  const bool train_wm = phase != Phase::kFinetune || config_.finetune_world_model;
+bool Agent::trains_world_model() const {
+  // Trained in pretrain and dreamer, a frozen feature extractor in finetune (unless
+  // agent.finetune_world_model trains it there too).
+  return config_.phase != Phase::kFinetune || config_.finetune_world_model;
+}
+
+WorldModelOutput Agent::world_model_loss(const SequenceBatch& batch, std::vector<Tensor>& losses,
+                                         TrainMetrics& metrics) {
+  const Phase phase = config_.phase;
+  const bool task_phase = phase != Phase::kPretrain;
+  const int b = batch.batch, t = batch.length;
   WorldModelOutput out;
-  // The update's losses; stop-gradients keep each inside its own part of the model.
-  std::vector<Tensor> losses;
-  if (!train_wm) {
+  if (!trains_world_model()) {
     {
       nn::NoGradGuard frozen;
       out = wm_->observe(batch, false, rng_);
@@ -150,67 +146,60 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
                                  {"wm/rep", out.rep},
                                  {"wm/cont", out.cont}});
   if (task_phase) metrics.emplace_back("wm/reward", out.reward);
-  timing_.world_model = clock.lap(&flops_.world_model);
+  return out;
+}
 
-  // Intrinsic module: trained on replay transitions in pretraining only.
-  if (phase == Phase::kPretrain) {
-    Transitions tr = make_transitions(out.features, out.post_probs,
-                                      WorldModel::action_one_hot(batch.actions, b, t),
-                                      WorldModel::time_major_column(batch.is_first, b, t), b);
-    losses.push_back(intrinsic_->loss(tr));
-    metrics.emplace_back("intrinsic/loss", intrinsic_->last_loss());
-    timing_.intrinsic = clock.lap(&flops_.intrinsic);
-  }
+Tensor Agent::intrinsic_loss(const SequenceBatch& batch, const WorldModelOutput& out,
+                             TrainMetrics& metrics) {
+  const int b = batch.batch, t = batch.length;
+  Transitions tr = make_transitions(out.features, out.post_probs,
+                                    WorldModel::action_one_hot(batch.actions, b, t),
+                                    WorldModel::time_major_column(batch.is_first, b, t), b);
+  Tensor loss = intrinsic_->loss(tr);
+  metrics.emplace_back("intrinsic/loss", intrinsic_->last_loss());
+  return loss;
+}
 
-  // Behaviour in imagination from every posterior state.
-  ActorCritic& behavior = task_phase ? *task_ : *expl_;
+ImaginedTrajectory Agent::imagine_from(const SequenceBatch& batch, const WorldModelOutput& out,
+                                       ActorCritic& behavior) {
   const RssmState start{nn::stop_gradient(out.deter), nn::stop_gradient(out.stoch)};
   std::vector<float> start_cont;
-  {
-    // Time-major like the posterior states: row t * B + i is step t of sequence i.
-    Tensor terminal = WorldModel::time_major_column(batch.is_terminal, b, t);
-    start_cont.reserve(terminal.numel());
-    for (float x : terminal.values()) start_cont.push_back(1.0f - x);
-  }
-  ImaginedTrajectory traj = behavior.imagine(*wm_, start, rng_, std::move(start_cont));
-  timing_.imagine = clock.lap(&flops_.imagine);
-  std::vector<float> rewards;
-  {
-    nn::NoGradGuard no_grad;
-    if (task_phase) {
-      rewards = row_values(traj.next_features(),
-                           [&](Tensor u) { return nn::twohot_mean(wm_->reward_logits(u)); });
-    } else {
-      rewards = intrinsic_->reward(traj.state_features(), traj.actions, traj.next_features());
-      metrics.emplace_back("intrinsic/raw_reward", intrinsic_->last_raw_reward());
-      metrics.emplace_back("intrinsic/raw_std", intrinsic_->last_raw_std());
-    }
-  }
-  timing_.reward = clock.lap(&flops_.reward);
-  BehaviorMetrics bm;
-  losses.push_back(behavior.loss(traj, rewards, &bm));
-  const std::string prefix = task_phase ? "task/" : "expl/";
-  metrics.insert(metrics.end(), {{prefix + "reward", bm.reward_mean},
-                                 {prefix + "return", bm.return_mean},
-                                 {prefix + "return_scale", bm.return_scale},
-                                 {prefix + "value", bm.value_mean},
-                                 {prefix + "actor_loss", bm.actor_loss},
-                                 {prefix + "critic_loss", bm.critic_loss},
-                                 {prefix + "entropy", bm.entropy}});
-  timing_.behavior = clock.lap(&flops_.behavior);
+  // Time-major like the posterior states: row t * B + i is step t of sequence i.
+  Tensor terminal = WorldModel::time_major_column(batch.is_terminal, batch.batch, batch.length);
+  start_cont.reserve(terminal.numel());
+  for (float x : terminal.values()) start_cont.push_back(1.0f - x);
+  return behavior.imagine(*wm_, start, rng_, std::move(start_cont));
+}
 
+std::vector<float> Agent::imagined_rewards(const ImaginedTrajectory& traj, TrainMetrics& metrics) {
+  nn::NoGradGuard no_grad;
+  if (config_.phase != Phase::kPretrain) {
+    return row_values(traj.next_features(),
+                      [&](Tensor u) { return nn::twohot_mean(wm_->reward_logits(u)); });
+  }
+  std::vector<float> rewards =
+      intrinsic_->reward(traj.state_features(), traj.actions, traj.next_features());
+  metrics.emplace_back("intrinsic/raw_reward", intrinsic_->last_raw_reward());
+  metrics.emplace_back("intrinsic/raw_std", intrinsic_->last_raw_std());
+  return rewards;
+}
+
+void Agent::backward_and_step(const std::vector<Tensor>& losses, ActorCritic& behavior,
+                              TrainMetrics& metrics, StageClock& clock) {
+  const Phase phase = config_.phase;
   // One backward for all losses: its independent parts side by side on the engine's threads,
   // or their sum with each op split over the threads. Only the optimisers of the parts that
   // train in this phase are stepped. With parts, the intrinsic module's and the actor-critic's
   // optimisers step inside their parts, on the thread that ran the part, while the world
   // model's part may still run (their time counts as backward); the first loss's optimisers
   // (world model, reward head) step afterwards over every thread.
-  const int intrinsic_loss = phase == Phase::kPretrain ? 1 : -1;
-  const int behavior_loss = static_cast<int>(losses.size()) - 1;
+  const int intrinsic_part = phase == Phase::kPretrain ? 1 : -1;
+  const int behavior_part = static_cast<int>(losses.size()) - 1;
   auto step_part = [&](int i) {
-    if (i == intrinsic_loss) intrinsic_->step();
-    if (i == behavior_loss) behavior.step();
+    if (i == intrinsic_part) intrinsic_->step();
+    if (i == behavior_part) behavior.step();
   };
+  nn::Graph& graph = nn::current_graph();
   if (config_.backward_parts) {
     graph.backward(losses, step_part);
   } else {
@@ -219,6 +208,7 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
     graph.backward(total);
   }
   timing_.backward = clock.lap(&flops_.backward);
+  const bool train_wm = trains_world_model();
   if (train_wm) {
     const nn::StepStats s = wm_opt_->step();
     metrics.emplace_back("wm/grad_norm", s.grad_norm);
@@ -232,6 +222,45 @@ TrainMetrics Agent::train_step(const SequenceBatch& batch) {
   if (!train_wm) wm_->params().zero_grad();
   if (phase != Phase::kPretrain) intrinsic_->params().zero_grad();
   timing_.optimizers = clock.lap(&flops_.optimizers);
+}
+
+TrainMetrics Agent::train_step(const SequenceBatch& batch) {
+  check_batch(batch);
+  const bool task_phase = config_.phase != Phase::kPretrain;
+  StageClock clock;
+  timing_ = {};
+  flops_ = {};
+  nn::current_graph().reset();
+  TrainMetrics metrics;
+  // The update's losses; stop-gradients keep each inside its own part of the model.
+  std::vector<Tensor> losses;
+
+  const WorldModelOutput out = world_model_loss(batch, losses, metrics);
+  timing_.world_model = clock.lap(&flops_.world_model);
+  // Intrinsic module: trained on replay transitions in pretraining only.
+  if (!task_phase) {
+    losses.push_back(intrinsic_loss(batch, out, metrics));
+    timing_.intrinsic = clock.lap(&flops_.intrinsic);
+  }
+  // Behaviour in imagination from every posterior state.
+  ActorCritic& behavior = task_phase ? *task_ : *expl_;
+  const ImaginedTrajectory traj = imagine_from(batch, out, behavior);
+  timing_.imagine = clock.lap(&flops_.imagine);
+  const std::vector<float> rewards = imagined_rewards(traj, metrics);
+  timing_.reward = clock.lap(&flops_.reward);
+  BehaviorMetrics bm;
+  losses.push_back(behavior.loss(traj, rewards, &bm));
+  const std::string prefix = task_phase ? "task/" : "expl/";
+  metrics.insert(metrics.end(), {{prefix + "reward", bm.reward_mean},
+                                 {prefix + "return", bm.return_mean},
+                                 {prefix + "return_scale", bm.return_scale},
+                                 {prefix + "value", bm.value_mean},
+                                 {prefix + "actor_loss", bm.actor_loss},
+                                 {prefix + "critic_loss", bm.critic_loss},
+                                 {prefix + "entropy", bm.entropy}});
+  timing_.behavior = clock.lap(&flops_.behavior);
+
+  backward_and_step(losses, behavior, metrics, clock);
   ++train_steps_;
   return metrics;
 }

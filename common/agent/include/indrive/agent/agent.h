@@ -111,8 +111,25 @@ class Agent {
   std::vector<nn::ParamGroup*> groups();
 
  private:
+  class StageClock;  // times the stages of one update (agent.cc)
+
   std::vector<const nn::ParamGroup*> groups() const;
   std::vector<nn::Adam*> optimizers() const;
+
+  // The stages of train_step(), in order.
+  void check_batch(const SequenceBatch& batch) const;
+  bool trains_world_model() const;
+  // The world model's loss (or, frozen, the reward and continuation heads') onto `losses`.
+  WorldModelOutput world_model_loss(const SequenceBatch& batch, std::vector<nn::Tensor>& losses,
+                                    TrainMetrics& metrics);
+  nn::Tensor intrinsic_loss(const SequenceBatch& batch, const WorldModelOutput& out,
+                            TrainMetrics& metrics);
+  ImaginedTrajectory imagine_from(const SequenceBatch& batch, const WorldModelOutput& out,
+                                  ActorCritic& behavior);
+  // Task phases: the reward head's; pretraining: the intrinsic module's.
+  std::vector<float> imagined_rewards(const ImaginedTrajectory& traj, TrainMetrics& metrics);
+  void backward_and_step(const std::vector<nn::Tensor>& losses, ActorCritic& behavior,
+                         TrainMetrics& metrics, StageClock& clock);
 
   AgentConfig config_;
   nn::Rng rng_;
