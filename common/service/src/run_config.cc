@@ -43,9 +43,8 @@ std::string number_text(double value) {
   return buffer;
 }
 
-}  // namespace
-
-void declare_service_schema(config::Schema& schema) {
+// The agent's keys (agent.*) and the presets that set them.
+void declare_agent_keys(config::Schema& schema) {
   // The agent's keys, mirrored under agent.* with the default preset's values; the agent's own
   // parser checks each value when the config is turned into an AgentConfig.
   const agent::AgentConfig defaults = agent::preset(kDefaultPreset);
@@ -100,7 +99,10 @@ void declare_service_schema(config::Schema& schema) {
     schema.add_preset(name, std::move(overrides),
                       std::string("agent sizes of the ") + name + " preset (ARCHITECTURE.md 6)");
   }
+}
 
+// run.* and env.*: the seed, the budget and the environment.
+void declare_run_and_env_keys(config::Schema& schema) {
   schema.add_int("run.seed", 0, "seed of spawns, traffic and random actions", 0)
       .add_int("run.budget_env_steps", 0,
                "the learner stops after this many env steps (0: no limit)", 0);
@@ -116,6 +118,10 @@ void declare_service_schema(config::Schema& schema) {
                   "right_loop) or left, the mirror design (straight and left_loop)")
       .add_float("env.coverage_segment_m", 10.0,
                  "length of the lane pieces the exploration coverage counts", 0.5);
+}
+
+// actor.* and local.*: what training actors and indrive-train-local do.
+void declare_actor_keys(config::Schema& schema) {
   schema.add_int("actor.chunk_length", 64, "steps per TrajectoryChunk (L)", 1, 4096)
       .add_float("actor.heartbeat_s", 1.0, "seconds between heartbeats", 0.05)
       .add_float("actor.request_after_s", 2.0,
@@ -135,6 +141,10 @@ void declare_service_schema(config::Schema& schema) {
   schema.add_bool("local.random", false,
                   "indrive-train-local acts randomly throughout and never trains (the "
                   "exploration baseline)");
+}
+
+// learner.*: replay ratio, snapshots, logs, checkpoints, the page.
+void declare_learner_keys(config::Schema& schema) {
   schema
       .add_float("learner.replay_ratio", 32.0, "replayed steps per env step the learner keeps",
                  0.001)
@@ -160,6 +170,10 @@ void declare_service_schema(config::Schema& schema) {
                  "dashboard` process the learner (or indrive-train-local) starts beside itself "
                  "(0: none; `indrive launch` sets 0 and writes the page itself)",
                  0.0);
+}
+
+// eval.*: the evaluation grid, its protocol, the policies and the probe.
+void declare_eval_keys(config::Schema& schema) {
   schema.add_string("eval.towns", "town01,town02", "towns of the evaluation grid, comma-separated")
       .add_string("eval.routes", "all",
                   "routes of the evaluation grid, comma-separated, or all: every town's own "
@@ -212,6 +226,16 @@ void declare_service_schema(config::Schema& schema) {
       .add_bool("eval.probe_oracle_brake", false,
                 "route probe: the oracle coasts behind leaders and for crossing traffic (off: "
                 "its coasting depends on the turn ahead and so tells the exit)");
+}
+
+}  // namespace
+
+void declare_service_schema(config::Schema& schema) {
+  declare_agent_keys(schema);
+  declare_run_and_env_keys(schema);
+  declare_actor_keys(schema);
+  declare_learner_keys(schema);
+  declare_eval_keys(schema);
   dds::declare_config(schema);
 }
 
