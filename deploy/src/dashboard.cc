@@ -388,148 +388,7 @@ std::string status_html(const fs::path& status_file) {
   return html.str();
 }
 
-constexpr const char* kStyle = R"css(
-body{font:14px/1.4 system-ui,sans-serif;margin:0;color:#222;background:#fafafa}
-header{background:#263238;color:#fff;padding:10px 20px;position:sticky;top:0;z-index:2}
-header h1{font-size:18px;margin:0}header .state{font-size:13px;opacity:.85}
-header nav a{color:#b3e5fc;margin-right:14px;font-size:13px}
-header .live{color:#a5d6a7}header .ended{color:#ffcc80}
-main{padding:10px 20px}section{margin-bottom:24px}h2{border-bottom:1px solid #ccc}
-.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(440px,1fr));gap:12px}
-.chart{background:#fff;border:1px solid #ddd;border-radius:4px;padding:6px;position:relative;
-height:280px}.chart canvas{width:100%!important;height:100%!important}
-.zoombox{position:absolute;background:rgba(33,150,243,.15);border:1px solid #2196f3;
-pointer-events:none;display:none}
-table{border-collapse:collapse;background:#fff;margin:6px 0}
-td,th{border:1px solid #ddd;padding:3px 7px;font-size:13px;text-align:left}th{background:#eceff1}
-figure{display:inline-block;margin:6px;vertical-align:top}figure img{max-width:560px;
-border:1px solid #ddd;image-rendering:pixelated}video{max-width:520px;border:1px solid #ddd}
-pre{background:#fff;border:1px solid #ddd;padding:8px;overflow:auto;max-height:480px}
-.controls{margin:6px 0;font-size:13px}.note{color:#666;font-size:13px}
-.state-failed,.state-waiting_restart{color:#c62828;font-weight:bold}.state-running{color:#2e7d32}
-)css";
 
-// Draws every chart, records what it holds in data-* attributes of <body> (read by the
-// browser test) and wires hover, drag-to-zoom (double-click resets) and smoothing.
-constexpr const char* kScript = R"js(
-(function () {
-  const errors = [];
-  const report = () => { document.body.dataset.errors = JSON.stringify(errors); };
-  window.addEventListener('error', e => { errors.push(String(e.message)); report(); });
-  report();
-  const palette = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b',
-                   '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
-  const colour = (i, alpha) => {
-    const c = palette[i % palette.length];
-    if (alpha === undefined) return c;
-    const n = parseInt(c.slice(1), 16);
-    return `rgba(${n >> 16},${(n >> 8) & 255},${n & 255},${alpha})`;
-  };
-  const points = (xs, ys) => {
-    const out = [];
-    for (let i = 0; i < ys.length; ++i) if (ys[i] !== null && xs[i] !== null) out.push({x: xs[i], y: ys[i]});
-    return out;
-  };
-  const smooth = (raw, weight) => {
-    if (weight <= 0 || raw.length < 50) return raw;
-    let ema = raw[0].y;
-    return raw.map(p => { ema = weight * ema + (1 - weight) * p.y; return {x: p.x, y: ema}; });
-  };
-  // Axis ticks: plain numbers with a few significant digits, exponents only where needed.
-  const tick = v => {
-    const a = Math.abs(v);
-    if (a !== 0 && (a < 1e-3 || a >= 1e7)) return Number(v).toExponential(1);
-    return Number(v).toLocaleString('en', {maximumSignificantDigits: 4});
-  };
-  const charts = [];
-  const counts = {};
-  for (const spec of DATA.charts) {
-    const canvas = document.getElementById(spec.id);
-    const datasets = [];
-    for (const s of spec.series) {
-      const xs = DATA.xs[s.xi];
-      if (s.low) {
-        datasets.push({label: '\u200b' + s.label + ' low', data: points(xs, s.low), borderWidth: 0,
-                       pointRadius: 0, fill: false, backgroundColor: colour(s.colour, 0.15)});
-        datasets.push({label: '\u200b' + s.label + ' high', data: points(xs, s.high), borderWidth: 0,
-                       pointRadius: 0, fill: '-1', backgroundColor: colour(s.colour, 0.15)});
-      }
-      const raw = points(xs, s.y);
-      datasets.push({label: s.label, raw: raw, data: raw, borderColor: colour(s.colour),
-                     backgroundColor: colour(s.colour), borderWidth: 1.5,
-                     pointRadius: raw.length < 30 ? 2.5 : 0, fill: false});
-    }
-    const chart = new Chart(canvas, {
-      type: 'line',
-      data: {datasets: datasets},
-      options: {
-        animation: false, parsing: false, normalized: true, spanGaps: true,
-        maintainAspectRatio: false,
-        interaction: {mode: 'nearest', axis: 'x', intersect: false},
-        scales: {x: {type: 'linear', title: {display: true, text: DATA.x_key},
-                     ticks: {callback: tick}},
-                 y: {title: {display: spec.y_label !== '', text: spec.y_label},
-                     ticks: {callback: tick}}},
-        plugins: {
-          title: {display: true, text: spec.title},
-          legend: {labels: {boxWidth: 12, filter: item => !item.text.startsWith('\u200b')}},
-          tooltip: {filter: item => !item.dataset.label.startsWith('\u200b')},
-          decimation: {enabled: true, algorithm: 'lttb', samples: 800, threshold: 1000}
-        }
-      }
-    });
-    charts.push(chart);
-    counts[spec.title] = {};
-    for (const d of chart.data.datasets) {
-      if (d.label.startsWith('\u200b')) continue;
-      counts[spec.title][d.label] = (d._data || d.data).length;
-    }
-    // Drag across a chart to zoom into that range of the x axis; double-click to reset.
-    const box = document.createElement('div');
-    box.className = 'zoombox';
-    canvas.parentNode.appendChild(box);
-    let start = null;
-    canvas.addEventListener('mousedown', e => { start = e.offsetX; });
-    canvas.addEventListener('mousemove', e => {
-      if (start === null) return;
-      const area = chart.chartArea;
-      box.style.display = 'block';
-      box.style.left = (canvas.offsetLeft + Math.min(start, e.offsetX)) + 'px';
-      box.style.width = Math.abs(e.offsetX - start) + 'px';
-      box.style.top = (canvas.offsetTop + area.top) + 'px';
-      box.style.height = (area.bottom - area.top) + 'px';
-    });
-    window.addEventListener('mouseup', e => {
-      if (start === null) return;
-      const end = e.target === canvas ? e.offsetX : start;
-      box.style.display = 'none';
-      if (Math.abs(end - start) > 5) {
-        const scale = chart.scales.x;
-        chart.options.scales.x.min = scale.getValueForPixel(Math.min(start, end));
-        chart.options.scales.x.max = scale.getValueForPixel(Math.max(start, end));
-        chart.update('none');
-      }
-      start = null;
-    });
-    canvas.addEventListener('dblclick', () => {
-      delete chart.options.scales.x.min;
-      delete chart.options.scales.x.max;
-      chart.update('none');
-    });
-  }
-  const smoothing = document.getElementById('smoothing');
-  if (smoothing) smoothing.addEventListener('change', () => {
-    const weight = parseFloat(smoothing.value);
-    for (const chart of charts) {
-      for (const d of chart.data.datasets) if (d.raw) d.data = smooth(d.raw, weight);
-      chart.update('none');
-    }
-  });
-  document.body.dataset.points = JSON.stringify(counts);
-  document.body.dataset.charts = String(charts.length);
-  document.body.dataset.ready = '1';
-})();
-)js";
 
 // The built-in towns' route set the runs ran with: env.route_set of each run's resolved
 // config.yaml (right, the default, where a run has none). Empty when the runs disagree or name
@@ -668,7 +527,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
     html << "<meta http-equiv=\"refresh\" content=\""
          << std::max(1, static_cast<int>(std::lround(input.live_refresh_s))) << "\">\n";
   }
-  html << "<style>" << kStyle << "</style>\n<script>" << chartjs_source() << "</script>\n";
+  html << "<style>" << dashboard_style() << "</style>\n<script>" << chartjs_source() << "</script>\n";
   html << "</head><body>\n<header><h1>" << escape_html(title) << "</h1><div class=\"state\">";
   const std::string now = local_time_now();
   std::string ended = input.ended;
@@ -793,7 +652,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   }
   html << "</section>\n</main>\n<script>const DATA = {\"x_key\":\"env_steps\"," << data.substr(1)
        << ";\n"
-       << kScript << "</script>\n</body></html>\n";
+       << dashboard_script() << "</script>\n</body></html>\n";
   if (stats != nullptr) {
     stats->charts = charts.size();
     stats->points = points;

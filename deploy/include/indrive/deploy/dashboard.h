@@ -86,5 +86,8 @@ std::string local_time_now();
 
 // Chart.js as shipped by libjs-chart.js, embedded at build time.
 std::string_view chartjs_source();
+// The page's own style and script (deploy/assets/dashboard.css and .js), embedded likewise.
+std::string_view dashboard_style();
+std::string_view dashboard_script();
 
 }  // namespace indrive::deploy
