@@ -50,10 +50,12 @@
 # grid: --seeds "S ..." and --methods "M ..." (the cells; --seed and --method by default),
 # --dreamer-tasks "T ..." (none by default), --stages as a chain's, --slurm (submit with sbatch),
 # --sbatch OPTION (repeatable, e.g. --sbatch --partition=cpu); the other options go to every stage.
+# INDRIVE_GRID_BIN=DIR runs the programs from DIR instead of build/bin: a copy of the binaries
+# keeps a grid of several hours on one build while the tree is rebuilt beside it.
 set -euo pipefail
 
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
-bin="$root/build/bin"
+bin="${INDRIVE_GRID_BIN:-$root/build/bin}"
 out="$root/runs/paper-grid"
 preset=tiny
 pretrain_steps=100000

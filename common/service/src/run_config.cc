@@ -216,7 +216,7 @@ void declare_eval_keys(config::Schema& schema) {
                 "evaluate every eval.every_k-th new snapshot into eval/curve-<id>.csv")
       .add_int("eval.every_k", 1, "snapshot versions between continuous evaluations", 1)
       .add_float("eval.probe_far_m", 14.0,
-                 "route probe (indrive-actor --probe): states are recorded from this many metres "
+                 "route probe (indrive-route-probe): states are recorded from this many metres "
                  "before each junction where a route chooses ...",
                  1.0, 100.0)
       .add_float("eval.probe_near_m", 6.0,

@@ -132,7 +132,7 @@ int run_routes(std::map<std::string, std::string> flags) {
   std::printf(
       "  layout bound: a policy that picks its exit by what a junction offers follows at most\n"
       "  %zu of %d routes (%s): average SR <= %.0f%% unless it tells look-alike junctions\n"
-      "  apart by what it sees or remembers (indrive-actor --probe measures whether a\n"
+      "  apart by what it sees or remembers (indrive-route-probe measures whether a\n"
       "  snapshot can)\n",
       bound.routes_followed.size(), bound.route_count, followed.c_str(),
       bound.route_count > 0 ? 100.0 * bound.routes_followed.size() / bound.route_count : 0.0);

@@ -53,7 +53,7 @@ struct EvalConfig {
   double budget_speed_mps = 3.0;
   double budget_slack = 1.5;
   int video_episodes = 0;
-  // The route probe (route_probe.h).
+  // The route probe's settings (tools/route_probe/, indrive-route-probe).
   double probe_far_m = 14.0;
   double probe_near_m = 6.0;
   bool probe_oracle_brake = false;

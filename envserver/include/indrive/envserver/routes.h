@@ -272,7 +272,7 @@ std::vector<RouteConflict> route_conflicts(const std::vector<Route>& routes);
 // straight, right) and must choose one. Two routes that take different exits at junctions of
 // the same layout are look-alikes: a policy that decides by the layout alone follows at most
 // one of them, whatever it learned. (A camera policy may see more than the layout: the route
-// probe, actor/route_probe.h, measures whether a snapshot's inputs tell the places apart.)
+// probe, tools/route_probe/, measures whether a snapshot's inputs tell the places apart.)
 //
 // One choice a route makes: at the end of `approach` the junction offers `layout` (the turn
 // directions of its exits, U-turns left out, partial turns counted as turns: a sorted string

@@ -57,7 +57,7 @@ class Policy {
   // Action probabilities of the last act() call (9 values).
   const std::vector<float>& last_probs() const { return last_probs_; }
   // With `keep` set, act() also keeps the encoder's embedding of its frame (embed_dim values),
-  // what the frame alone tells the policy; the route probe (actor/route_probe.h) reads it.
+  // what the frame alone tells the policy; the route probe (tools/route_probe/) reads it.
   void keep_embedding(bool keep) { keep_embedding_ = keep; }
   const std::vector<float>& last_embedding() const { return last_embedding_; }
   std::uint64_t loaded_snapshots() const { return loaded_; }

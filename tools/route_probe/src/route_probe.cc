@@ -1,4 +1,4 @@
-#include "indrive/actor/route_probe.h"
+#include "indrive/route_probe/route_probe.h"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -23,7 +23,26 @@
 #include "indrive/basics/log.h"
 #include "indrive/envserver/env.h"
 
-namespace indrive::actor {
+namespace indrive::route_probe {
+
+// The actor's evaluation pieces the probe drives with.
+using actor::acting_config;
+using actor::adopt_snapshot_architecture;
+using actor::check_snapshot_head;
+using actor::EpisodePolicy;
+using actor::EpisodeSpec;
+using actor::eval_config;
+using actor::EvalConfig;
+using actor::EvalError;
+using actor::make_oracle_policy;
+using actor::PolicyHead;
+using actor::protocol_env_config;
+using actor::protocol_grid;
+using actor::ProtocolGrid;
+using actor::resolve_head;
+using actor::route_step_budget;
+using actor::snapshot_file_path;
+
 namespace {
 
 int exit_class(char taken) { return taken == 'l' ? 0 : taken == 'r' ? 1 : 2; }
@@ -588,4 +607,4 @@ std::vector<ProbeSample> RouteProbe::collect(const std::atomic<bool>& stop) {
   return samples;
 }
 
-}  // namespace indrive::actor
+}  // namespace indrive::route_probe

@@ -1,7 +1,7 @@
 // The route probe: where each route chooses (choice points of the built-in towns), the linear
 // probe on data whose answer is known, the scoring against the layout rule, and a short
 // collection run with an untrained tiny snapshot.
-#include "indrive/actor/route_probe.h"
+#include "indrive/route_probe/route_probe.h"
 
 #include <gtest/gtest.h>
 
@@ -15,7 +15,7 @@
 #include "indrive/envserver/town.h"
 #include "testing.h"
 
-namespace indrive::actor {
+namespace indrive::route_probe {
 namespace {
 
 using agent::write_snapshot_file;
@@ -196,18 +196,18 @@ TEST(RouteProbe, CollectsStatesBeforeEachChoiceOfTheOraclesEpisodes) {
   EXPECT_EQ(decisions.size(), straight.size() + right.size());
 }
 
-// As a user runs it: indrive-actor --probe --snapshot FILE writes <run>/probe/probe.md with the
+// As a user runs it: indrive-route-probe --snapshot FILE writes <run>/probe/probe.md with the
 // held-out episodes of the training town and the other town; without a file it says what to add.
 TEST(RouteProbe, TheCommandWritesBothTablesAndRefusesAMissingSnapshot) {
   testing::TempDir dir;
   const agent::AgentConfig tiny = agent::preset("tiny");
   const auto file = dir.path() / "untrained.params";
   write_snapshot_file(file, agent::Agent(tiny).snapshot(), tiny);
-  const std::string program = std::string(INDRIVE_BIN_DIR) + "/indrive-actor";
+  const std::string program = std::string(INDRIVE_BIN_DIR) + "/indrive-route-probe";
   const auto log = dir.path() / "probe.log";
   testing::Child probe(
-      {program, "--probe", "--snapshot", file.string(), "--run-dir", (dir.path() / "run").string(),
-       "--set", "eval.kind=zero_shot", "--set", "eval.routes=straight,right_loop", "--set",
+      {program, "--snapshot", file.string(), "--run-dir", (dir.path() / "run").string(), "--set",
+       "eval.kind=zero_shot", "--set", "eval.routes=straight,right_loop", "--set",
        "eval.densities=[5]", "--set", "eval.episodes_per_cell=2"},
       log);
   ASSERT_EQ(probe.wait(120s), 0) << testing::slurp(log);
@@ -220,22 +220,21 @@ TEST(RouteProbe, TheCommandWritesBothTablesAndRefusesAMissingSnapshot) {
   EXPECT_NE(testing::slurp(log).find("episode 8/8"), std::string::npos) << testing::slurp(log);
 
   const auto bad_log = dir.path() / "bad.log";
-  testing::Child bad({program, "--probe", "--run-dir", (dir.path() / "bad").string()}, bad_log);
+  testing::Child bad({program, "--run-dir", (dir.path() / "bad").string()}, bad_log);
   EXPECT_NE(bad.wait(60s), 0);
-  EXPECT_NE(testing::slurp(bad_log).find("--probe needs --snapshot FILE"), std::string::npos)
+  EXPECT_NE(testing::slurp(bad_log).find("--snapshot is required"), std::string::npos)
       << testing::slurp(bad_log);
   // A training town outside the grid is refused before any episode is driven.
   const auto town_log = dir.path() / "town.log";
   testing::Child town(
-      {program, "--probe", "--snapshot", file.string(), "--run-dir", (dir.path() / "town").string(),
-       "--set", "eval.towns=town01", "--probe-train-town", "town02"},
+      {program, "--snapshot", file.string(), "--run-dir", (dir.path() / "town").string(), "--set",
+       "eval.towns=town01", "--train-town", "town02"},
       town_log);
   EXPECT_NE(town.wait(60s), 0);
-  EXPECT_NE(testing::slurp(town_log).find("--probe-train-town town02 is not among"),
-            std::string::npos)
+  EXPECT_NE(testing::slurp(town_log).find("--train-town town02 is not among"), std::string::npos)
       << testing::slurp(town_log);
   EXPECT_EQ(testing::slurp(town_log).find("episode 1/"), std::string::npos);
 }
 
 }  // namespace
-}  // namespace indrive::actor
+}  // namespace indrive::route_probe

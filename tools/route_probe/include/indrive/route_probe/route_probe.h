@@ -40,7 +40,7 @@
 #include "indrive/envserver/routes.h"
 #include "indrive/service/run_config.h"
 
-namespace indrive::actor {
+namespace indrive::route_probe {
 
 // A junction where a route chooses: the route reaches it at arc length junction_s_m (where the
 // first lane inside the junction begins) from `approach`, the junction offers `layout` and the
@@ -163,4 +163,4 @@ class RouteProbe {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace indrive::actor
+}  // namespace indrive::route_probe
