@@ -30,6 +30,7 @@ packages=(
   libgtest-dev libgmock-dev
   ffmpeg
   libjs-chart.js
+  libplplot-dev plplot-driver-cairo
 )
 # The test command also builds and briefly runs the fuzz targets (tests/fuzz/README.md):
 # clang's libFuzzer and sanitizer runtimes, and its OpenMP.

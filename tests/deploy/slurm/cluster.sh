@@ -69,7 +69,7 @@ EOF
     chmod 400 "$DIR/munge.key"
     munged --socket="$DIR/munge.sock" --key-file="$DIR/munge.key" --pid-file="$DIR/munged.pid" \
       --log-file="$DIR/munged.log" --seed-file="$DIR/munge.seed" --force
-    cpus=$(nproc)
+    cpus=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)  # nproc obeys OMP_NUM_THREADS
     memory=$(($(awk '/MemTotal/ { print $2 }' /proc/meminfo) / 1024 / 2))
     mkdir -p "$DIR/ctld"
     # The controller's name must be this machine's host name (slurmctld checks it); its address

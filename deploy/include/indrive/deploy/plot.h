@@ -1,4 +1,5 @@
-// Line plots to PNG for learning curves (losses, intrinsic reward, SR over env steps).
+// Line plots to PNG for learning curves (losses, intrinsic reward, SR over env steps), drawn
+// by PLplot (line_plot.cc).
 //
 //   LinePlot plot("World-model loss", "env steps", "loss");
 //   plot.add_series("disag", xs, ys);
@@ -38,6 +39,9 @@ class LinePlot {
   void save(const std::filesystem::path& path, int width = 800, int height = 480) const;
 
  private:
+  struct Range;  // the data's extent, padded
+  void draw_axes(const Range& range) const;
+  void draw_series(const Range& range) const;
   struct Series {
     std::string name;
     std::vector<double> x;
