@@ -19,9 +19,15 @@ env::EnvConfig env_config(const service::ServiceConfig& service, const agent::Ag
   env.camera.width = agent.world_model.image;
   env.camera.height = agent.world_model.image;
   env.events.time_limit_steps = config.get<int>("env.time_limit_steps");
-  env.town_options.route_set = config.get<std::string>("env.route_set");
+  env.town_options = town_options(config);
   if (agent.phase != agent::Phase::kPretrain) env.task = agent.task;
   return env;
+}
+
+env::TownOptions town_options(const config::Config& config) {
+  env::TownOptions options;
+  options.route_set = config.get<std::string>("env.route_set");
+  return options;
 }
 
 std::vector<std::string> route_list(const std::string& text) {
@@ -70,7 +76,8 @@ EnvAdapterOptions EnvAdapter::options_from(const service::ServiceConfig& config)
           .route = c.get<std::string>("env.route"),
           .densities = c.get<std::vector<double>>("env.densities"),
           .density_period_steps = c.get<std::int64_t>("env.density_period_steps"),
-          .seed = static_cast<std::uint64_t>(c.get<std::int64_t>("run.seed"))};
+          .seed = static_cast<std::uint64_t>(c.get<std::int64_t>("run.seed")),
+          .coverage_segment_m = c.get<double>("env.coverage_segment_m")};
 }
 
 agent::EnvStep EnvAdapter::convert(const env::StepResult& result) {

@@ -67,9 +67,7 @@ ProtocolGrid protocol_grid(const config::Config& config) {
   const EvalConfig eval = eval_config(config);
   ProtocolGrid grid;
   grid.towns = split_list(eval.towns);
-  env::TownOptions town_options;
-  town_options.route_set = config.get<std::string>("env.route_set");
-  set_grid_routes(grid, eval.routes, town_options);
+  set_grid_routes(grid, eval.routes, town_options(config));
   grid.densities.clear();
   for (double density : eval.densities) grid.densities.push_back(static_cast<int>(density));
   grid.episodes_per_cell = eval.episodes_per_cell;

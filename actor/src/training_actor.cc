@@ -60,13 +60,13 @@ struct TrainingActor::Impl {
     connect();
     heartbeat("starting");
 
-    densities = service.config().get<std::vector<double>>("env.densities");
-    density_period = service.config().get<std::int64_t>("env.density_period_steps");
-    routes = route_list(service.config().get<std::string>("env.route"));
+    const EnvAdapterOptions episodes = EnvAdapter::options_from(service);
+    densities = episodes.densities;
+    density_period = episodes.density_period_steps;
+    routes = route_list(episodes.route);
     env = std::make_unique<env::Env>(env_config);
     coverage = std::make_unique<env::CoverageTracker>(
-        env->town().net,
-        env::CoverageOptions{.segment_m = service.config().get<double>("env.coverage_segment_m")});
+        env->town().net, env::CoverageOptions{.segment_m = episodes.coverage_segment_m});
     coverage_period_s = settings.coverage_period_s;
     INDRIVE_LOG(kInfo, "actor") << "actor " << id << " of run '" << service.run_id()
                                 << "' ready: town " << env_config.town << ", image "

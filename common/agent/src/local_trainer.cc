@@ -102,4 +102,9 @@ void LocalTrainer::load(const std::filesystem::path& dir) {
   refresh_policy();
 }
 
+void LocalTrainer::load_agent(std::span<const std::uint8_t> bytes, const std::string& name) {
+  agent_.load_checkpoint(bytes, name);
+  refresh_policy();
+}
+
 }  // namespace indrive::agent

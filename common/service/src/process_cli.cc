@@ -20,7 +20,7 @@ std::atomic<bool> g_stop{false};
 // here so that --check-config shows a name that does not resolve.
 std::string discovery_summary(const ServiceConfig& config) {
   const auto server =
-      dds::resolve_discovery_server(config.config().get<std::string>("dds.discovery_server"));
+      dds::resolve_discovery_server(config.participant_options("").discovery_server);
   return server ? ", discovery server " + server->describe() : "";
 }
 

@@ -8,6 +8,7 @@
 #include <optional>
 #include <sstream>
 
+#include "indrive/actor/actor_config.h"
 #include "indrive/actor/env_adapter.h"
 #include "indrive/actor/eval_protocol.h"
 #include "indrive/actor/eval_protocol_episode.h"
@@ -38,37 +39,30 @@ RunDir open_run(const service::ServiceConfig& config) {
       config.run_id());
 }
 
+// The local.* settings, the keys only indrive-train-local reads.
+struct LocalSettings {
+  bool random = false;  // local.random: uniform random actions, no training (the baseline)
+};
+LocalSettings local_settings(const config::Config& config) {
+  return {.random = config.get<bool>("local.random")};
+}
+
 // The agent's config for this process: random mode never leaves prefill, so it never trains.
 // A finetune without a checkpoint to start from is refused here, before SUMO starts.
 agent::AgentConfig local_agent_config(const service::ServiceConfig& config) {
   agent::AgentConfig agent = config.training_agent("local");
   const bool resumable = CheckpointFiles(open_run(config).checkpoints(), 1000).newest().has_value();
-  if (agent.phase == agent::Phase::kFinetune && !config.config().get<bool>("local.random") &&
+  if (agent.phase == agent::Phase::kFinetune && !local_settings(config.config()).random &&
       !resumable && learner::learner_config(config.config()).init_checkpoint.empty()) {
     throw LocalRunError(
         "finetune needs a pretrained agent: set learner.init_checkpoint to a pretraining "
         "run's checkpoint, e.g. --set learner.init_checkpoint=runs/<run>/checkpoints/"
         "ckpt-000000000100.bin");
   }
-  if (config.config().get<bool>("local.random")) {
+  if (local_settings(config.config()).random) {
     agent.replay.prefill = std::numeric_limits<std::int64_t>::max();
   }
   return agent;
-}
-
-// Loads agent checkpoint bytes (the agent's own format) into `load`, through a staging file.
-void with_staged_agent(const fs::path& folder, const std::vector<std::uint8_t>& agent_bytes,
-                       const std::function<void(const fs::path& dir)>& load) {
-  const fs::path staging = folder / "agent-staging";
-  fs::create_directories(staging);
-  atomic_write(staging / "agent.ckpt", agent_bytes);
-  try {
-    load(staging);
-  } catch (...) {
-    fs::remove_all(staging);
-    throw;
-  }
-  fs::remove_all(staging);
 }
 
 // The agent bytes of a checkpoint file: a learner checkpoint (counters + agent) or a bare agent
@@ -117,7 +111,7 @@ class LazyEnvironment : public agent::Environment {
 };
 
 std::string method_name(const service::ServiceConfig& config, const agent::AgentConfig& agent) {
-  if (config.config().get<bool>("local.random")) return "random";
+  if (local_settings(config.config()).random) return "random";
   return agent::method_label(agent);
 }
 
@@ -128,12 +122,13 @@ struct LocalRun::Impl {
       : config(service),
         settings(learner::learner_config(service.config())),
         agent_config(local_agent_config(service)),
-        random(service.config().get<bool>("local.random")),
+        random(local_settings(service.config()).random),
         run(open_run(service)),
         checkpoints(run.checkpoints(), settings.checkpoint_keep),
         town(env::load_town(actor::env_config(service).town,
                             actor::env_config(service).town_options)),
-        coverage(town.net, {.segment_m = service.config().get<double>("env.coverage_segment_m")}),
+        coverage(town.net,
+                 {.segment_m = actor::EnvAdapter::options_from(service).coverage_segment_m}),
         environment(
             service,
             [this](const env::StepResult& result) {
@@ -156,8 +151,7 @@ struct LocalRun::Impl {
     if (const auto newest = checkpoints.newest()) {
       std::vector<std::uint8_t> replay_bytes;
       base = read_checkpoint(*newest, agent_bytes, &replay_bytes);
-      with_staged_agent(run.checkpoints(), agent_bytes,
-                        [this](const fs::path& dir) { trainer.load(dir); });
+      trainer.load_agent(agent_bytes, newest->string());
       // The replay goes on where it stopped: no second random prefill in the middle of a run.
       if (!replay_bytes.empty()) {
         trainer.replay().load(replay_bytes, newest->string() + " (replay)");
@@ -176,8 +170,7 @@ struct LocalRun::Impl {
                             "(runs/<run>/checkpoints/ckpt-*.bin)");
       }
       read_checkpoint(init, agent_bytes);
-      with_staged_agent(run.checkpoints(), agent_bytes,
-                        [this](const fs::path& dir) { trainer.load(dir); });
+      trainer.load_agent(agent_bytes, init);
       INDRIVE_LOG(kInfo, "local") << "initialised from " << init;
     }
     ++base.learner_epoch;
@@ -373,7 +366,7 @@ const env::CoverageTracker& LocalRun::coverage() const { return impl_->coverage;
 EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const std::string& route,
                                    int episodes, const std::atomic<bool>& stop) {
   const agent::AgentConfig agent_config = config.agent();
-  const bool random = config.config().get<bool>("local.random");
+  const bool random = local_settings(config.config()).random;
   const RunDir run = open_run(config);
 
   // The acting policy of the newest checkpoint, or uniform random actions in random mode, as
@@ -382,7 +375,7 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
   long long version = 0;
   if (random) {
     policy = actor::make_random_policy(
-        static_cast<std::uint64_t>(config.config().get<std::int64_t>("run.seed")));
+        static_cast<std::uint64_t>(learner::learner_config(config.config()).seed));
   } else {
     const auto newest = CheckpointFiles(run.checkpoints(), 1000).newest();
     if (!newest) {
@@ -393,8 +386,7 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
     std::vector<std::uint8_t> agent_bytes;
     version = read_checkpoint(*newest, agent_bytes).updates;
     agent::Agent agent(agent_config);
-    with_staged_agent(run.checkpoints(), agent_bytes,
-                      [&](const fs::path& dir) { agent.load_checkpoint(dir / "agent.ckpt"); });
+    agent.load_checkpoint(agent_bytes, newest->string());
     const actor::PolicyHead head = agent_config.phase == agent::Phase::kPretrain
                                        ? actor::PolicyHead::kExploration
                                        : actor::PolicyHead::kTask;
@@ -404,20 +396,20 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
   }
 
   actor::ProtocolGrid grid;
-  const std::string town = config.config().get<std::string>("env.town");
+  const std::string town = actor::env_config(config).town;
+  const actor::EvalConfig eval = actor::eval_config(config.config());
   grid.towns = {town};
   grid.routes = {route};
   grid.densities.clear();
-  for (const double d : config.config().get<std::vector<double>>("eval.densities")) {
+  for (const double d : eval.densities) {
     grid.densities.push_back(static_cast<int>(d));
   }
   grid.episodes_per_cell = episodes;
   grid.validate();
 
   // As in the evaluator, episodes end at the route's own step budget (below).
-  env::Env env(actor::protocol_env_config(
-      actor::env_config(config),
-      actor::parse_protocol(config.config().get<std::string>("eval.protocol"))));
+  env::Env env(
+      actor::protocol_env_config(actor::env_config(config), actor::parse_protocol(eval.protocol)));
   EpisodeCsvWriter csv(run.eval() /
                        ("local-" + actor::town_file_label(town) + "-" + route + ".csv"));
   EvaluationSummary summary;

@@ -15,6 +15,7 @@
 #include "indrive/actor/env_adapter.h"
 #include "indrive/basics/data_path.h"
 #include "indrive/basics/log.h"
+#include "indrive/learner/learner_config.h"
 #include "indrive/learner/page_writer.h"
 #include "indrive/local/local_run.h"
 #include "indrive/service/process_cli.h"
@@ -54,7 +55,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (evaluate_episodes > 0) {
-      if (route.empty()) route = config.config().get<std::string>("env.route");
+      if (route.empty()) route = indrive::actor::EnvAdapter::options_from(config).route;
       if (route.empty()) route = "straight";
       // env.route may list several routes (task runs draw one per episode): each is evaluated.
       for (const std::string& name : indrive::actor::route_list(route)) {
@@ -67,7 +68,8 @@ int main(int argc, char** argv) {
       }
       return 0;
     }
-    if (const double every_s = config.config().get<double>("learner.dashboard_s"); every_s > 0) {
+    if (const double every_s = indrive::learner::learner_config(config.config()).dashboard_s;
+        every_s > 0) {
       page.emplace(indrive::own_program_folder() / "indrive", config.run_dir(), every_s);
     }
     indrive::local::LocalRun run(config);

@@ -29,6 +29,8 @@ namespace indrive::actor {
 env::EnvConfig env_config(const service::ServiceConfig& service);
 // The same for another agent configuration (an evaluator's, sized by its snapshot file).
 env::EnvConfig env_config(const service::ServiceConfig& service, const agent::AgentConfig& agent);
+// The town options of a run's configuration (env.route_set).
+env::TownOptions town_options(const config::Config& config);
 
 // The routes named by `env.route`: none (empty text: random spawns, pretraining), one name, or
 // a comma-separated list (task phases on several fixed routes, as the paper fine-tunes on the
@@ -46,7 +48,8 @@ struct EnvAdapterOptions {
   std::string route;  // env.route: empty (random spawns), one route or a comma-separated list
   std::vector<double> densities = {10};  // drawn uniformly every density_period_steps
   std::int64_t density_period_steps = 10000;
-  std::uint64_t seed = 0;  // seeds densities, traffic and spawns
+  std::uint64_t seed = 0;            // seeds densities, traffic and spawns
+  double coverage_segment_m = 10.0;  // env.coverage_segment_m: the coverage tracker's segments
 };
 
 class EnvAdapter : public agent::Environment {
@@ -54,8 +57,8 @@ class EnvAdapter : public agent::Environment {
   // The environment must outlive the adapter. Throws std::invalid_argument for an empty
   // density list or a period below 1.
   EnvAdapter(env::Env& env, EnvAdapterOptions options);
-  // The options a training actor of this run uses (env.route, env.densities,
-  // env.density_period_steps, run.seed).
+  // The options a training actor of this run uses (env.town, env.route, env.densities,
+  // env.density_period_steps, run.seed, env.coverage_segment_m).
   static EnvAdapterOptions options_from(const service::ServiceConfig& config);
 
   // Starts an episode with the next density and fresh seeds; returns its first frame.

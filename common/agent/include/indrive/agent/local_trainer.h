@@ -13,6 +13,8 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <span>
+#include <string>
 #include <vector>
 
 #include "indrive/agent/agent.h"
@@ -76,6 +78,9 @@ class LocalTrainer {
   void save(const std::filesystem::path& dir) const;
   // Restores agent.ckpt (and replay.bin when present and of this phase's reward mode).
   void load(const std::filesystem::path& dir);
+  // Restores the agent from checkpoint bytes in memory (Agent::checkpoint_bytes; `name` for
+  // errors) and acts with it.
+  void load_agent(std::span<const std::uint8_t> bytes, const std::string& name);
 
   Agent& agent() { return agent_; }
   ReplayBuffer& replay() { return replay_; }
