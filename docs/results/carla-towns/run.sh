@@ -38,9 +38,10 @@ done
 
 # 3. The grid on the CARLA towns (pretraining on carla_town01, evaluation under both
 #    protocols, 50 episodes per cell): one chain per seed and method, resumable. On
-#    2026-12-06 and 2026-12-07: seed 0 of disag, icm, rnd and random; on 2026-12-07 seed 1 of
-#    disag, icm and rnd (icm and rnd side by side, one core each, beside other work).
-for s in 0 1; do
+#    2026-12-06 and 2026-12-07: seed 0 of disag, icm, rnd and random; on 2026-12-07 seeds 1 and 2
+#    of disag, icm and rnd (icm and rnd side by side, one core each, beside other work; seed 2
+#    with INDRIVE_GRID_BIN naming a copy of the binaries of commit b03573b).
+for s in 0 1 2; do
   for m in disag icm rnd; do
     deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --seed "$s" --method "$m" \
       --stages "pretrain zeroshot" --episodes 50
@@ -58,7 +59,7 @@ done
 wait
 
 # The page: each evaluation's CSV under sanity/eval/ and shipped/eval/ with their reports, and
-# the grid's runs, CSVs, the snapshots of seeds 0 and 1, pretraining summary and report.
+# the grid's runs, CSVs, the snapshots of seeds 0-2, pretraining summary and report.
 page=docs/results/carla-towns
 for part in sanity shipped; do
   mkdir -p "$page/$part/eval"
@@ -68,4 +69,4 @@ for part in sanity shipped; do
   $bin/indrive report "$page/$part/eval" --out "$page/$part"
 done
 deploy/experiments/paper_grid.sh publish --out runs/carla-grid --page docs/results/carla-towns \
-  --snapshot-seeds "0 1"
+  --snapshot-seeds "0 1 2"
