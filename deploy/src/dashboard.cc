@@ -388,8 +388,6 @@ std::string status_html(const fs::path& status_file) {
   return html.str();
 }
 
-
-
 // The built-in towns' route set the runs ran with: env.route_set of each run's resolved
 // config.yaml (right, the default, where a run has none). Empty when the runs disagree or name
 // a set this build does not know: then no one set's layout bound describes the tables.
@@ -493,8 +491,12 @@ std::string videos_section(const DashboardInput& input, const fs::path& page_dir
   return html.str();
 }
 
-std::string render_dashboard(const DashboardInput& input, const fs::path& page_dir,
-                             DashboardStats* stats, DashboardCache* cache) {
+namespace {
+
+// The pieces of render_dashboard, one per part of the page.
+
+// Every run of the page's groups; throws for an empty group or a folder that is no run.
+std::vector<fs::path> run_dirs_of(const DashboardInput& input) {
   if (input.runs.empty()) throw std::invalid_argument("dashboard: name at least one run");
   std::vector<fs::path> all_runs;
   for (const auto& group : input.runs) {
@@ -509,26 +511,12 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
       all_runs.push_back(run);
     }
   }
-  std::string title = input.title;
-  if (title.empty()) {
-    for (const auto& group : input.runs) title += (title.empty() ? "" : ", ") + group.label;
-  }
+  return all_runs;
+}
 
-  const std::vector<Chart> charts = build_charts(input.runs, cache);
-  std::size_t points = 0;
-  const std::string data = charts_json(charts, &points);
-  std::size_t videos = 0;
-  const std::string videos_html = videos_section(input, page_dir, videos);
-
-  std::ostringstream html;
-  html << "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>indrive: "
-       << escape_html(title) << "</title>\n";
-  if (input.live_refresh_s > 0) {
-    html << "<meta http-equiv=\"refresh\" content=\""
-         << std::max(1, static_cast<int>(std::lround(input.live_refresh_s))) << "\">\n";
-  }
-  html << "<style>" << dashboard_style() << "</style>\n<script>" << chartjs_source() << "</script>\n";
-  html << "</head><body>\n<header><h1>" << escape_html(title) << "</h1><div class=\"state\">";
+// How the run stands, for the header: live, ended (as the caller or a one-run page's
+// status.json says) or only when the page was written.
+std::string state_html(const DashboardInput& input, const std::vector<fs::path>& all_runs) {
   const std::string now = local_time_now();
   std::string ended = input.ended;
   if (ended.empty() && input.live_refresh_s <= 0 && all_runs.size() == 1 &&
@@ -540,9 +528,10 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
         ended = "ended " + status.value("written", std::string("?"));
       }
     } catch (const nlohmann::json::exception&) {
-      // status_html below names the broken file.
+      // status_html names the broken file.
     }
   }
+  std::ostringstream html;
   if (input.live_refresh_s > 0) {
     html << "<span class=\"live\">live</span>: written " << now << ", reloads every "
          << std::lround(input.live_refresh_s) << " s while the run goes on";
@@ -551,13 +540,31 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   } else {
     html << "written " << now;
   }
+  return html.str();
+}
+
+std::string head_html(const DashboardInput& input, const std::string& title,
+                      const std::vector<fs::path>& all_runs) {
+  std::ostringstream html;
+  html << "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>indrive: "
+       << escape_html(title) << "</title>\n";
+  if (input.live_refresh_s > 0) {
+    html << "<meta http-equiv=\"refresh\" content=\""
+         << std::max(1, static_cast<int>(std::lround(input.live_refresh_s))) << "\">\n";
+  }
+  html << "<style>" << dashboard_style() << "</style>\n<script>" << chartjs_source()
+       << "</script>\n";
+  html << "</head><body>\n<header><h1>" << escape_html(title) << "</h1><div class=\"state\">"
+       << state_html(input, all_runs);
   html << "</div><nav><a href=\"#curves\">curves</a><a href=\"#tables\">tables</a>"
           "<a href=\"#maps\">maps</a><a href=\"#videos\">videos</a><a href=\"#processes\">"
           "processes</a><a href=\"#config\">config</a></nav></header>\n<main>\n";
-  // Videos first where they are the point of the page (the main job's learned policy).
-  if (input.videos_first) html << videos_html;
+  return html.str();
+}
 
-  // Curves, grouped.
+// The charts' canvases, grouped; the page's script draws them from DATA.
+std::string curves_section(const std::vector<Chart>& charts) {
+  std::ostringstream html;
   html << "<section id=\"curves\"><h2>Curves</h2><div class=\"controls\">against "
        << "env steps; hover for values, drag across a chart to zoom, double-click to reset. "
        << "Smoothing <select id=\"smoothing\"><option value=\"0\">none</option>"
@@ -575,8 +582,12 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
   }
   if (!open_group.empty()) html << "</div>\n";
   html << "</section>\n";
+  return html.str();
+}
 
-  // The report's tables.
+// The report's tables over the runs' evaluations.
+std::string tables_section(const DashboardInput& input, const std::vector<fs::path>& all_runs) {
+  std::ostringstream html;
   html << "<section id=\"tables\"><h2>Tables</h2>\n";
   try {
     const Report report = aggregate(load_results(all_runs));
@@ -588,8 +599,11 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
     html << "<p class=\"note\">no evaluation episodes yet (the runs' eval/*.csv)</p>\n";
   }
   html << "</section>\n";
+  return html.str();
+}
 
-  // Training episodes per route (train-episodes.csv), newest 5 of each route.
+// Training episodes per route (train-episodes.csv), newest 5 of each route.
+std::string training_section(const std::vector<fs::path>& all_runs) {
   constexpr int kLastEpisodes = 5;
   std::vector<RunTraining> trained;
   for (const fs::path& run : all_runs) {
@@ -600,6 +614,7 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
     } catch (const std::exception&) {  // no finished episode yet, or a file being written
     }
   }
+  std::ostringstream html;
   html << "<section id=\"training\"><h2>Training per route</h2>\n";
   if (trained.empty()) {
     html << "<p class=\"note\">no finished training episodes yet (the runs' "
@@ -608,9 +623,12 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
     html << markdown_to_html(render_training(trained, kLastEpisodes));
   }
   html << "</section>\n";
+  return html.str();
+}
 
-  // Coverage and town maps.
-  std::size_t pictures = 0;
+// Coverage and town maps from the runs' plots/, embedded; counts them into `pictures`.
+std::string maps_section(const DashboardInput& input, std::size_t& pictures) {
+  std::ostringstream html;
   html << "<section id=\"maps\"><h2>Coverage and town maps</h2>\n";
   for (const auto& group : input.runs) {
     for (const auto& run : group.runs) {
@@ -630,10 +648,12 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
             "draws the coverage map)</p>\n";
   }
   html << "</section>\n";
+  return html.str();
+}
 
-  if (!input.videos_first) html << videos_html;
-
-  // Processes and the resolved configs.
+// The processes (status.json) and the resolved configs of the runs.
+std::string processes_and_config_sections(const std::vector<fs::path>& all_runs) {
+  std::ostringstream html;
   html << "<section id=\"processes\"><h2>Processes</h2>\n";
   bool any_status = false;
   for (const auto& run : all_runs) {
@@ -650,8 +670,34 @@ std::string render_dashboard(const DashboardInput& input, const fs::path& page_d
     html << "<details><summary>" << escape_html((run / "config.yaml").string()) << "</summary><pre>"
          << escape_html(read_text(run / "config.yaml")) << "</pre></details>\n";
   }
-  html << "</section>\n</main>\n<script>const DATA = {\"x_key\":\"env_steps\"," << data.substr(1)
-       << ";\n"
+  html << "</section>\n";
+  return html.str();
+}
+
+}  // namespace
+
+std::string render_dashboard(const DashboardInput& input, const fs::path& page_dir,
+                             DashboardStats* stats, DashboardCache* cache) {
+  const std::vector<fs::path> all_runs = run_dirs_of(input);
+  std::string title = input.title;
+  if (title.empty()) {
+    for (const auto& group : input.runs) title += (title.empty() ? "" : ", ") + group.label;
+  }
+  const std::vector<Chart> charts = build_charts(input.runs, cache);
+  std::size_t points = 0;
+  const std::string data = charts_json(charts, &points);
+  std::size_t videos = 0, pictures = 0;
+  const std::string videos_html = videos_section(input, page_dir, videos);
+
+  std::ostringstream html;
+  html << head_html(input, title, all_runs);
+  // Videos first where they are the point of the page (the main job's learned policy).
+  if (input.videos_first) html << videos_html;
+  html << curves_section(charts) << tables_section(input, all_runs) << training_section(all_runs)
+       << maps_section(input, pictures);
+  if (!input.videos_first) html << videos_html;
+  html << processes_and_config_sections(all_runs);
+  html << "</main>\n<script>const DATA = {\"x_key\":\"env_steps\"," << data.substr(1) << ";\n"
        << dashboard_script() << "</script>\n</body></html>\n";
   if (stats != nullptr) {
     stats->charts = charts.size();

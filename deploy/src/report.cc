@@ -337,10 +337,11 @@ TownChoices route_choices_of(const Report& report, const std::string& route_set)
   return choices;
 }
 
-std::string render_markdown(const Report& report, const std::string& seen_name,
-                            const std::string& heldout_name, const TownChoices& choices,
-                            const std::string& route_set) {
-  std::ostringstream md;
+namespace {
+
+// The pieces of render_markdown, one per section of a table.
+
+void write_header(std::ostringstream& md, const Report& report) {
   md << "# Results\n\n"
      << report.episodes << " episodes from " << report.runs.size() << " run(s)"
      << (report.env_faults > 0
@@ -354,225 +355,265 @@ std::string render_markdown(const Report& report, const std::string& seen_name,
      << "episodes behind the cell. Averages over routes and gaps: with 2 or more seeds, [95% CI] "
      << "is a t-interval over the seeds' own averages (gaps), clamped to the possible range, "
      << "none with one seed; \"per seed\" lists those averages.\n";
-  for (const auto& [key, table] : report.tables) {
-    md << "\n## " << title_of(key) << "\n";
-    for (const auto& town : table.towns) {
-      // The routes evaluated in this town (the CARLA towns' differ from ours and each other).
-      std::vector<std::string> routes;
-      for (const auto& route : table.routes) {
-        for (const auto& method : table.methods) {
-          if (find_cell(table, method, town, route) != nullptr) {
-            routes.push_back(route);
-            break;
-          }
-        }
-      }
-      md << "\n### " << town << "\n\n| method |";
-      for (const auto& route : routes) md << " " << route << " SR | FR | n |";
-      md << "\n|---|";
-      for (std::size_t i = 0; i < routes.size(); ++i) md << "---|---|---|";
-      md << "\n";
+}
+
+// One table per town: SR with its interval, FR and n per route.
+void write_route_tables(std::ostringstream& md, const Table& table) {
+  for (const auto& town : table.towns) {
+    // The routes evaluated in this town (the CARLA towns' differ from ours and each other).
+    std::vector<std::string> routes;
+    for (const auto& route : table.routes) {
       for (const auto& method : table.methods) {
-        md << "| " << method << " |";
-        for (const auto& route : routes) {
-          const CellStats* s = find_cell(table, method, town, route);
-          if (s == nullptr) {
-            md << " - | - | 0 |";
-          } else {
-            md << " " << fixed(s->sr) << " [" << fixed(s->ci_low) << ", " << fixed(s->ci_high)
-               << "] | " << fixed(s->fr()) << " | " << s->episodes << " |";
-          }
+        if (find_cell(table, method, town, route) != nullptr) {
+          routes.push_back(route);
+          break;
         }
-        md << "\n";
       }
     }
-    // Averages over routes and the generalisation gap.
-    md << "\n### Average SR over routes\n\n| method |";
-    for (const auto& town : table.towns) md << " " << town << " |";
-    // The gap between the towns named, or between their CARLA namesakes in a table of CARLA
-    // towns only (town01 -> carla_town01).
-    // (A lambda may not capture the structured binding `table` under clang 14.)
-    const std::vector<std::string>& towns = table.towns;
-    const auto holds = [&towns](const std::string& town) {
-      return std::find(towns.begin(), towns.end(), town) != towns.end();
-    };
-    const bool carla_pair = !holds(seen_name) && !holds(heldout_name) &&
-                            holds("carla_" + seen_name) && holds("carla_" + heldout_name);
-    const std::string seen_town = carla_pair ? "carla_" + seen_name : seen_name;
-    const std::string heldout_town = carla_pair ? "carla_" + heldout_name : heldout_name;
-    const bool has_gap =
-        std::find(table.towns.begin(), table.towns.end(), seen_town) != table.towns.end() &&
-        std::find(table.towns.begin(), table.towns.end(), heldout_town) != table.towns.end();
-    if (has_gap) md << " gap (" << seen_town << " - " << heldout_town << ") |";
-    // With two or three seeds a t-interval is wide (t = 12.7 for two) and clamped to the range;
-    // each seed's own averages say more, so a table where some method has 2 or more seeds lists
-    // them: "s0 25.0 / 0.0" is seed 0's average over routes in each town, in column order.
-    bool several_seeds = false;
-    for (const auto& method : table.methods) {
-      for (const auto& town : table.towns) {
-        const auto means = route_means_by_seed(table, method, town);
-        several_seeds = several_seeds || (means && means->size() >= 2);
-      }
-    }
-    if (several_seeds) {
-      md << " per seed (";
-      for (std::size_t i = 0; i < table.towns.size(); ++i) {
-        md << (i > 0 ? " / " : "") << table.towns[i];
-      }
-      md << ") |";
-    }
+    md << "\n### " << town << "\n\n| method |";
+    for (const auto& route : routes) md << " " << route << " SR | FR | n |";
     md << "\n|---|";
-    for (std::size_t i = 0; i < table.towns.size() + (has_gap ? 1 : 0) + (several_seeds ? 1 : 0);
-         ++i) {
-      md << "---|";
-    }
+    for (std::size_t i = 0; i < routes.size(); ++i) md << "---|---|---|";
     md << "\n";
-    // With 2 or more seeds a cell also carries the t-interval over the seeds' own averages
-    // (and gaps), which is what tells two methods apart; one seed's has none.
-    const auto with_interval = [](double value, const std::optional<SeedInterval>& by_seed) {
-      std::string text = fixed(value);
-      if (by_seed && by_seed->seeds >= 2) {
-        text += " [" + fixed(by_seed->ci_low) + ", " + fixed(by_seed->ci_high) + "]";
-      }
-      return text;
-    };
     for (const auto& method : table.methods) {
       md << "| " << method << " |";
-      for (const auto& town : table.towns) {
-        md << " "
-           << with_interval(average_over_routes(table, method, town),
-                            average_over_routes_by_seed(table, method, town))
-           << " |";
+      for (const auto& route : routes) {
+        const CellStats* s = find_cell(table, method, town, route);
+        if (s == nullptr) {
+          md << " - | - | 0 |";
+        } else {
+          md << " " << fixed(s->sr) << " [" << fixed(s->ci_low) << ", " << fixed(s->ci_high)
+             << "] | " << fixed(s->fr()) << " | " << s->episodes << " |";
+        }
       }
-      if (has_gap) {
-        md << " "
-           << with_interval(average_over_routes(table, method, seen_town) -
-                                average_over_routes(table, method, heldout_town),
-                            gap_by_seed(table, method, seen_town, heldout_town))
-           << " |";
-      }
-      if (several_seeds) md << " " << per_seed_averages(table, method) << " |";
       md << "\n";
     }
-    if (key.eval_kind == "zero_shot") {
-      // The paper's own averages, in the columns of its towns.
-      for (const auto& method : table.methods) {
-        bool any = false;
-        for (const auto& town : table.towns) any = any || paper_zero_shot_average(method, town);
-        if (!any) continue;
-        md << "| *paper, " << method << "* |";
-        for (const auto& town : table.towns) {
-          const auto value = paper_zero_shot_average(method, town);
-          md << " " << (value ? fixed(*value, 2) : std::string("-")) << " |";
-        }
-        if (has_gap) {
-          const auto seen = paper_zero_shot_average(method, seen_town);
-          const auto held = paper_zero_shot_average(method, heldout_town);
-          md << " " << (seen && held ? fixed(*seen - *held, 2) : std::string("-")) << " |";
-        }
-        if (several_seeds) md << " |";
-        md << "\n";
+  }
+}
+
+// The columns of the averages table after the towns': the gap between the towns named, or
+// between their CARLA namesakes in a table of CARLA towns only (town01 -> carla_town01), and the
+// per-seed averages.
+struct AverageColumns {
+  std::string seen_town, heldout_town;
+  bool has_gap = false;
+  bool several_seeds = false;
+};
+
+AverageColumns average_columns(const Table& table, const std::string& seen_name,
+                               const std::string& heldout_name) {
+  const auto holds = [&table](const std::string& town) {
+    return std::find(table.towns.begin(), table.towns.end(), town) != table.towns.end();
+  };
+  const bool carla_pair = !holds(seen_name) && !holds(heldout_name) &&
+                          holds("carla_" + seen_name) && holds("carla_" + heldout_name);
+  AverageColumns columns;
+  columns.seen_town = carla_pair ? "carla_" + seen_name : seen_name;
+  columns.heldout_town = carla_pair ? "carla_" + heldout_name : heldout_name;
+  columns.has_gap = holds(columns.seen_town) && holds(columns.heldout_town);
+  // With two or three seeds a t-interval is wide (t = 12.7 for two) and clamped to the range;
+  // each seed's own averages say more, so a table where some method has 2 or more seeds lists
+  // them: "s0 25.0 / 0.0" is seed 0's average over routes in each town, in column order.
+  for (const auto& method : table.methods) {
+    for (const auto& town : table.towns) {
+      const auto means = route_means_by_seed(table, method, town);
+      columns.several_seeds = columns.several_seeds || (means && means->size() >= 2);
+    }
+  }
+  return columns;
+}
+
+// With 2 or more seeds a cell also carries the t-interval over the seeds' own averages (and
+// gaps), which is what tells two methods apart; one seed's has none.
+std::string with_interval(double value, const std::optional<SeedInterval>& by_seed) {
+  std::string text = fixed(value);
+  if (by_seed && by_seed->seeds >= 2) {
+    text += " [" + fixed(by_seed->ci_low) + ", " + fixed(by_seed->ci_high) + "]";
+  }
+  return text;
+}
+
+void write_average_rows(std::ostringstream& md, const Table& table, const AverageColumns& c) {
+  md << "\n### Average SR over routes\n\n| method |";
+  for (const auto& town : table.towns) md << " " << town << " |";
+  if (c.has_gap) md << " gap (" << c.seen_town << " - " << c.heldout_town << ") |";
+  if (c.several_seeds) {
+    md << " per seed (";
+    for (std::size_t i = 0; i < table.towns.size(); ++i) {
+      md << (i > 0 ? " / " : "") << table.towns[i];
+    }
+    md << ") |";
+  }
+  md << "\n|---|";
+  for (std::size_t i = 0; i < table.towns.size() + (c.has_gap ? 1 : 0) + (c.several_seeds ? 1 : 0);
+       ++i) {
+    md << "---|";
+  }
+  md << "\n";
+  for (const auto& method : table.methods) {
+    md << "| " << method << " |";
+    for (const auto& town : table.towns) {
+      md << " "
+         << with_interval(average_over_routes(table, method, town),
+                          average_over_routes_by_seed(table, method, town))
+         << " |";
+    }
+    if (c.has_gap) {
+      md << " "
+         << with_interval(average_over_routes(table, method, c.seen_town) -
+                              average_over_routes(table, method, c.heldout_town),
+                          gap_by_seed(table, method, c.seen_town, c.heldout_town))
+         << " |";
+    }
+    if (c.several_seeds) md << " " << per_seed_averages(table, method) << " |";
+    md << "\n";
+  }
+}
+
+// The paper's own zero-shot averages, in the columns of its towns.
+void write_paper_rows(std::ostringstream& md, const Table& table, const AverageColumns& c) {
+  for (const auto& method : table.methods) {
+    bool any = false;
+    for (const auto& town : table.towns) any = any || paper_zero_shot_average(method, town);
+    if (!any) continue;
+    md << "| *paper, " << method << "* |";
+    for (const auto& town : table.towns) {
+      const auto value = paper_zero_shot_average(method, town);
+      md << " " << (value ? fixed(*value, 2) : std::string("-")) << " |";
+    }
+    if (c.has_gap) {
+      const auto seen = paper_zero_shot_average(method, c.seen_town);
+      const auto held = paper_zero_shot_average(method, c.heldout_town);
+      md << " " << (seen && held ? fixed(*seen - *held, 2) : std::string("-")) << " |";
+    }
+    if (c.several_seeds) md << " |";
+    md << "\n";
+  }
+}
+
+// The layout bound is a bound of the strict rules (the route's own exits); under indrive_code a
+// policy may reach the end point by any path. Over the routes this table holds: the share one
+// layout -> exit rule follows.
+void write_layout_bound_row(std::ostringstream& md, const TableKey& key, const Table& table,
+                            const AverageColumns& c, const TownChoices& choices,
+                            const std::string& route_set) {
+  bool any_bound = false;
+  for (const auto& town : table.towns) {
+    any_bound = any_bound || (key.protocol == "strict" && choices.count(town) > 0);
+  }
+  if (!any_bound) return;
+  md << "| *layout bound* |";
+  for (const auto& town : table.towns) {
+    const auto found = choices.find(town);
+    if (found == choices.end()) {
+      md << " - |";
+      continue;
+    }
+    std::vector<env::RouteChoice> held;
+    for (const env::RouteChoice& choice : found->second) {
+      if (std::find(table.routes.begin(), table.routes.end(), choice.route) != table.routes.end()) {
+        held.push_back(choice);
       }
     }
-    // The layout bound is a bound of the strict rules (the route's own exits); under
-    // indrive_code a policy may reach the end point by any path.
-    bool any_bound = false;
+    const env::LayoutRuleBound bound = env::layout_rule_bound(table.routes, held);
+    md << " "
+       << fixed(100.0 * static_cast<double>(bound.routes_followed.size()) /
+                static_cast<double>(bound.route_count))
+       << " |";
+  }
+  if (c.has_gap) md << " |";
+  if (c.several_seeds) md << " |";
+  md << "\n\n*layout bound*: the highest average SR over these routes of a policy that sees "
+        "no route and picks its exit by the exits a junction offers, on the built-in "
+        "towns' route set `"
+     << route_set << "` (`indrive-env routes --route-set " << route_set
+     << "` lists the look-alike junctions).\n";
+}
+
+// Route completion: how far the policies get, where SR only says whether they arrive.
+void write_route_completion(std::ostringstream& md, const Table& table) {
+  md << "\n### Mean route completion (%)\n\n| method | town |";
+  for (const auto& route : table.routes) md << " " << route << " |";
+  md << " average |\n|---|---|";
+  for (std::size_t i = 0; i <= table.routes.size(); ++i) md << "---|";
+  md << "\n";
+  for (const auto& method : table.methods) {
     for (const auto& town : table.towns) {
-      any_bound = any_bound || (key.protocol == "strict" && choices.count(town) > 0);
-    }
-    if (any_bound) {
-      // Over the routes this table holds: the share one layout -> exit rule follows.
-      md << "| *layout bound* |";
-      for (const auto& town : table.towns) {
-        const auto c = choices.find(town);
-        if (c == choices.end()) {
+      md << "| " << method << " | " << town << " |";
+      double sum = 0.0;
+      int n = 0;
+      for (const auto& route : table.routes) {
+        const CellStats* s = find_cell(table, method, town, route);
+        if (s == nullptr) {
           md << " - |";
           continue;
         }
-        std::vector<env::RouteChoice> held;
-        for (const env::RouteChoice& choice : c->second) {
-          if (std::find(table.routes.begin(), table.routes.end(), choice.route) !=
-              table.routes.end()) {
-            held.push_back(choice);
-          }
-        }
-        const env::LayoutRuleBound bound = env::layout_rule_bound(table.routes, held);
-        md << " "
-           << fixed(100.0 * static_cast<double>(bound.routes_followed.size()) /
-                    static_cast<double>(bound.route_count))
-           << " |";
+        md << " " << fixed(s->rc) << " |";
+        sum += s->rc;
+        ++n;
       }
-      if (has_gap) md << " |";
-      if (several_seeds) md << " |";
-      md << "\n\n*layout bound*: the highest average SR over these routes of a policy that sees "
-            "no route and picks its exit by the exits a junction offers, on the built-in "
-            "towns' route set `"
-         << route_set << "` (`indrive-env routes --route-set " << route_set
-         << "` lists the look-alike junctions).\n";
+      md << " " << (n > 0 ? fixed(sum / n) : std::string("-")) << " |\n";
     }
-    // Route completion: how far the policies get, where SR only says whether they arrive.
-    md << "\n### Mean route completion (%)\n\n| method | town |";
-    for (const auto& route : table.routes) md << " " << route << " |";
-    md << " average |\n|---|---|";
-    for (std::size_t i = 0; i <= table.routes.size(); ++i) md << "---|";
-    md << "\n";
-    for (const auto& method : table.methods) {
-      for (const auto& town : table.towns) {
-        md << "| " << method << " | " << town << " |";
-        double sum = 0.0;
-        int n = 0;
-        for (const auto& route : table.routes) {
-          const CellStats* s = find_cell(table, method, town, route);
-          if (s == nullptr) {
-            md << " - |";
-            continue;
-          }
-          md << " " << fixed(s->rc) << " |";
-          sum += s->rc;
-          ++n;
-        }
-        md << " " << (n > 0 ? fixed(sum / n) : std::string("-")) << " |\n";
+  }
+}
+
+// Failure reasons per route, in kFailureOrder and then any others.
+void write_failure_reasons(std::ostringstream& md, const Table& table) {
+  std::set<std::string> reasons;
+  for (const auto& [method, towns] : table.failures) {
+    for (const auto& [town, routes] : towns) {
+      for (const auto& [route, counts] : routes) {
+        for (const auto& [reason, n] : counts) reasons.insert(reason);
       }
     }
-    // Failure reasons per route.
-    std::set<std::string> reasons;
-    for (const auto& [method, towns] : table.failures) {
-      for (const auto& [town, routes] : towns) {
-        for (const auto& [route, counts] : routes) {
-          for (const auto& [reason, n] : counts) reasons.insert(reason);
+  }
+  if (reasons.empty()) return;
+  std::vector<std::string> columns;
+  for (const auto& reason : kFailureOrder) {
+    if (reasons.count(reason)) columns.push_back(reason);
+  }
+  for (const auto& reason : reasons) push_unique(columns, reason);
+  md << "\n### Failure reasons (episodes)\n\n| method | town | route |";
+  for (const auto& reason : columns) md << " " << reason << " |";
+  md << "\n|---|---|---|";
+  for (std::size_t i = 0; i < columns.size(); ++i) md << "---|";
+  md << "\n";
+  for (const auto& method : table.methods) {
+    const auto m = table.failures.find(method);
+    if (m == table.failures.end()) continue;
+    for (const auto& town : table.towns) {
+      const auto t = m->second.find(town);
+      if (t == m->second.end()) continue;
+      for (const auto& route : table.routes) {
+        const auto r = t->second.find(route);
+        if (r == t->second.end()) continue;
+        md << "| " << method << " | " << town << " | " << route << " |";
+        for (const auto& reason : columns) {
+          const auto count = r->second.find(reason);
+          md << " " << (count == r->second.end() ? 0 : count->second) << " |";
         }
+        md << "\n";
       }
     }
-    if (!reasons.empty()) {
-      std::vector<std::string> columns;
-      for (const auto& reason : kFailureOrder) {
-        if (reasons.count(reason)) columns.push_back(reason);
-      }
-      for (const auto& reason : reasons) push_unique(columns, reason);
-      md << "\n### Failure reasons (episodes)\n\n| method | town | route |";
-      for (const auto& reason : columns) md << " " << reason << " |";
-      md << "\n|---|---|---|";
-      for (std::size_t i = 0; i < columns.size(); ++i) md << "---|";
-      md << "\n";
-      for (const auto& method : table.methods) {
-        const auto m = table.failures.find(method);
-        if (m == table.failures.end()) continue;
-        for (const auto& town : table.towns) {
-          const auto t = m->second.find(town);
-          if (t == m->second.end()) continue;
-          for (const auto& route : table.routes) {
-            const auto r = t->second.find(route);
-            if (r == t->second.end()) continue;
-            md << "| " << method << " | " << town << " | " << route << " |";
-            for (const auto& reason : columns) {
-              const auto c = r->second.find(reason);
-              md << " " << (c == r->second.end() ? 0 : c->second) << " |";
-            }
-            md << "\n";
-          }
-        }
-      }
-    }
+  }
+}
+
+}  // namespace
+
+std::string render_markdown(const Report& report, const std::string& seen_name,
+                            const std::string& heldout_name, const TownChoices& choices,
+                            const std::string& route_set) {
+  std::ostringstream md;
+  write_header(md, report);
+  for (const auto& [key, table] : report.tables) {
+    md << "\n## " << title_of(key) << "\n";
+    write_route_tables(md, table);
+    const AverageColumns columns = average_columns(table, seen_name, heldout_name);
+    write_average_rows(md, table, columns);
+    if (key.eval_kind == "zero_shot") write_paper_rows(md, table, columns);
+    write_layout_bound_row(md, key, table, columns, choices, route_set);
+    write_route_completion(md, table);
+    write_failure_reasons(md, table);
   }
   return md.str();
 }
