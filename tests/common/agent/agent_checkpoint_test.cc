@@ -16,10 +16,7 @@
 namespace indrive::agent {
 namespace {
 
-using test_support::dot_replay;
-using test_support::dot_replay_with_terminals;
-using test_support::tiny_config;
-using test_support::values_named;
+using namespace test_support;  // tiny_config, dot_replay, values_named, ...
 
 // The continuation head's optimiser state travels in the checkpoint as a last section; a
 // checkpoint written before it existed (without that section) still loads, the optimiser fresh.

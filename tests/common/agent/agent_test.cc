@@ -18,10 +18,7 @@
 namespace indrive::agent {
 namespace {
 
-using test_support::dot_replay;
-using test_support::dot_replay_with_terminals;
-using test_support::tiny_config;
-using test_support::values_named;
+using namespace test_support;  // tiny_config, dot_replay, values_named, ...
 
 std::vector<float> values_of(const nn::ParamGroup& g) {
   std::vector<float> out;
