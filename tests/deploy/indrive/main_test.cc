@@ -65,6 +65,30 @@ TEST(IndriveCompare, GroupsAndRunsMixAndTheirEndsArePrinted) {
   EXPECT_NE(output.find("env_steps 1000: 0.2 (0.1 to 0.3)"), std::string::npos) << output;
 }
 
+// A machine with PLplot but without its cairo driver (plplot-driver-cairo): the plot is an error
+// that names the package, where PLplot itself would end the program at its first plot.
+TEST(IndriveCompare, AMissingCairoDriverIsAnErrorThatNamesItsPackage) {
+  testing::TempDir dir;
+  const auto drivers = dir.path() / "drivers";
+  std::filesystem::create_directories(drivers);
+  int copied = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(PLPLOT_DRIVER_DIR)) {
+    if (entry.path().stem() == "cairo") continue;
+    std::filesystem::copy(entry.path(), drivers / entry.path().filename());
+    ++copied;
+  }
+  ASSERT_GT(copied, 0) << "PLplot ships drivers of its own (null, mem, ps)";
+  const auto run = write_run(dir.path() / "s0", 0.01).string();
+  const auto log = dir.path() / "compare.log";
+  testing::Child compare({kIndrive.string(), "compare", run, "--metric", "coverage", "--out",
+                          (dir.path() / "coverage.png").string()},
+                         log, {{"PLPLOT_DRV_DIR", drivers.string()}});
+  EXPECT_NE(compare.wait(30s), 0);
+  EXPECT_NE(testing::slurp(log).find("apt-get install plplot-driver-cairo"), std::string::npos)
+      << testing::slurp(log);
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "coverage.png"));
+}
+
 TEST(IndriveCompare, NothingToCompareOrABadGroupIsAnErrorThatSaysWhatToWrite) {
   testing::TempDir dir;
   const auto log = dir.path() / "compare.log";
