@@ -18,6 +18,7 @@
 #include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/episode_csv.h"
 #include "indrive/dds/participant.h"
+#include "process_harness.h"
 #include "testing.h"
 
 namespace indrive {
@@ -28,23 +29,6 @@ namespace fs = std::filesystem;
 
 using testing::Child;
 using testing::slurp;
-
-// What the test sees on the wire.
-struct Observed {
-  std::mutex mutex;
-  std::map<std::uint32_t, std::vector<std::uint64_t>> chunk_versions;  // per actor, in order
-  std::uint64_t newest_snapshot = 0;
-  std::uint64_t learner_env_steps = 0;  // from the learner's newest heartbeat
-  std::uint64_t snapshot_bytes = 0;
-
-  std::uint64_t min_newest_chunk_version() {
-    std::lock_guard<std::mutex> lock(mutex);
-    if (chunk_versions.size() < 2) return 0;
-    std::uint64_t low = UINT64_MAX;
-    for (auto& [actor, versions] : chunk_versions) low = std::min(low, versions.back());
-    return low;
-  }
-};
 
 class ServiceTest : public ::testing::Test {
  protected:
@@ -121,130 +105,122 @@ learner:
 };
 
 TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
-  dds::Participant participant(
-      {.domain_id = domain_,
-       .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()});
-  Observed seen;
-  auto chunk_reader =
-      participant.make_reader<msg::TrajectoryChunk>([&](const msg::TrajectoryChunk& chunk) {
-        if (chunk.actor_id() > 1) return;  // the test's own injected chunks
-        std::lock_guard<std::mutex> lock(seen.mutex);
-        seen.chunk_versions[chunk.actor_id()].push_back(chunk.policy_version());
-      });
-  auto snapshot_reader =
-      participant.make_reader<msg::PolicySnapshot>([&](const msg::PolicySnapshot& snapshot) {
-        std::lock_guard<std::mutex> lock(seen.mutex);
-        seen.newest_snapshot = std::max(seen.newest_snapshot, snapshot.version());
-        seen.snapshot_bytes = snapshot.params().size();
-      });
-  auto heartbeat_reader = participant.make_reader<msg::Heartbeat>([&](const msg::Heartbeat& beat) {
-    if (beat.role() != msg::ROLE_LEARNER) return;
-    std::lock_guard<std::mutex> lock(seen.mutex);
-    seen.learner_env_steps = beat.env_steps();
-  });
-  auto chunk_writer = participant.make_writer<msg::TrajectoryChunk>();
-
+  testing::ProcessWatch watch(domain_, testing::source_path("deploy/dds/single_host.xml"));
   auto learner = start_learner();
   auto actor0 = start_actor(0);
   auto actor1 = start_actor(1);
+  const auto state = [&] { return watch.describe() + logs(); };
+
+  // The watch's participant can come out deaf to a learner that both actors hear (a CI run on
+  // 2026-12-07 under load: no snapshot, no heartbeat and none of the injected chunks in 60 s,
+  // the actors switching snapshots throughout). Like the services' own participants, it is
+  // replaced when it has not heard the learner, or its chunk writer has not found the
+  // learner's reader, for 5 s while the actors are heard.
+  double deaf_since = -1.0;
+  const auto replace_if_deaf = [&] {
+    const double now = watch.now_s();
+    testing::SeenHeartbeat beat;
+    const bool heard = watch.heartbeat(msg::ROLE_LEARNER, 0, beat) && now - beat.time_s < 2.0;
+    // Its own reader and the learner's.
+    if ((heard && watch.chunk_writer().matched() >= 2) || watch.chunks().empty()) {
+      deaf_since = -1.0;
+    } else if (deaf_since < 0.0) {
+      deaf_since = now;
+    } else if (now - deaf_since > 5.0) {
+      watch.replace("the learner unheard or unmatched for 5 s while the actors are heard");
+      deaf_since = -1.0;
+    }
+  };
+  const auto running = [&] { return learner->running() && actor0->running() && actor1->running(); };
 
   // Both actors must act with a snapshot of version >= 2 (they start with the random policy,
-  // version 0) and the learner must have published at least version 3.
-  const auto deadline = std::chrono::steady_clock::now() + 100s;
-  while (std::chrono::steady_clock::now() < deadline && seen.min_newest_chunk_version() < 2) {
-    ASSERT_TRUE(learner->running()) << logs();
-    ASSERT_TRUE(actor0->running()) << logs();
-    ASSERT_TRUE(actor1->running()) << logs();
-    std::this_thread::sleep_for(200ms);
-  }
-  ASSERT_GE(seen.min_newest_chunk_version(), 2u) << logs();
-  {
-    std::lock_guard<std::mutex> lock(seen.mutex);
-    EXPECT_GE(seen.newest_snapshot, 2u);
-    EXPECT_GT(seen.snapshot_bytes, 0u);
-    for (auto& [actor, versions] : seen.chunk_versions) {
-      EXPECT_TRUE(std::is_sorted(versions.begin(), versions.end()))
-          << "actor " << actor << " never goes back to an older snapshot";
-    }
+  // version 0), and the watch must hear the learner's snapshots and heartbeats.
+  testing::wait_until(100s, [&] {
+    replace_if_deaf();
+    return !running() || (watch.min_newest_chunk_version({0, 1}) >= 2 &&
+                          watch.newest_snapshot() >= 2 && watch.chunk_writer().matched() >= 2);
+  });
+  ASSERT_TRUE(running()) << state();
+  ASSERT_GE(watch.min_newest_chunk_version({0, 1}), 2u) << state();
+  ASSERT_GE(watch.newest_snapshot(), 2u) << state();
+  for (const auto& snapshot : watch.snapshots()) EXPECT_GT(snapshot.bytes, 0u);
+  std::map<std::uint32_t, std::vector<std::uint64_t>> versions;  // per actor, in order
+  for (const auto& chunk : watch.chunks()) versions[chunk.actor_id].push_back(chunk.policy_version);
+  for (std::uint32_t actor : {0u, 1u}) {
+    EXPECT_TRUE(std::is_sorted(versions[actor].begin(), versions[actor].end()))
+        << "actor " << actor << " never goes back to an older snapshot";
   }
 
-  // Each actor started with the random policy and switched to a snapshot (the test's reader
-  // may match after the first chunks, so this is read from the actors' logs).
+  // Each actor started with the random policy and switched to a snapshot (the watch may match
+  // after the first chunks, so this is read from the actors' logs).
   for (const auto& name : {"actor-0.log", "actor-1.log"}) {
     EXPECT_NE(slurp(dir_.path() / name).find("acting with snapshot v"), std::string::npos) << name;
   }
 
-  // A chunk of another run and a chunk with a bad checksum: dropped, counted, no crash.
+  // A chunk of another run and a chunk with a bad checksum: dropped, counted, no crash. Written
+  // once the watch's writer has found the learner's reader (checked just above).
   actor::ChunkBuilder builder(
       {.run_id = "another-run", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
   std::vector<std::uint8_t> frame(32 * 32, 1);
   builder.add({.frame = frame, .is_first = true, .episode_step = 0});
   builder.add({.frame = frame, .episode_step = 1});
-  ASSERT_TRUE(chunk_writer->write(builder.take()));
+  ASSERT_TRUE(watch.chunk_writer().write(builder.take()));
   actor::ChunkBuilder ours(
       {.run_id = "itest", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
   ours.add({.frame = frame, .is_first = true, .episode_step = 0});
   ours.add({.frame = frame, .episode_step = 1});
   auto corrupt = ours.take();
   corrupt.checksum(corrupt.checksum() ^ 1u);
-  ASSERT_TRUE(chunk_writer->write(corrupt));
-  chunk_writer->wait_for_acknowledgments(5000ms);
+  ASSERT_TRUE(watch.chunk_writer().write(corrupt));
+  EXPECT_TRUE(watch.chunk_writer().wait_for_acknowledgments(10000ms)) << state();
   // Until a metrics line counts both (one comes every second), not for a fixed time.
-  const auto counted_deadline = std::chrono::steady_clock::now() + 60s;
-  while (std::chrono::steady_clock::now() < counted_deadline && learner->running()) {
+  testing::wait_until(60s, [&] {
     const auto line = last_metrics();  // null until the first line is written
-    if (line.is_object() && line.value("dropped_wrong_run", 0) >= 1 &&
-        line.value("dropped_bad_checksum", 0) >= 1) {
-      break;
-    }
-    std::this_thread::sleep_for(200ms);
-  }
-  EXPECT_TRUE(learner->running()) << logs();
+    return !learner->running() || (line.is_object() && line.value("dropped_wrong_run", 0) >= 1 &&
+                                   line.value("dropped_bad_checksum", 0) >= 1);
+  });
+  EXPECT_TRUE(learner->running()) << state();
 
   // SIGTERM: the learner checkpoints and exits cleanly.
   learner->signal(SIGTERM);
-  ASSERT_EQ(learner->wait(60s), 0) << logs();
+  ASSERT_EQ(learner->wait(60s), 0) << state();
   const auto metrics = last_metrics();
   ASSERT_FALSE(metrics.empty()) << "metrics.jsonl must have lines";
-  EXPECT_EQ(metrics.value("dropped_wrong_run", 0), 1) << metrics.dump();
+  EXPECT_EQ(metrics.value("dropped_wrong_run", 0), 1) << metrics.dump() << state();
   EXPECT_EQ(metrics.value("dropped_bad_checksum", 0), 1) << metrics.dump();
   EXPECT_GT(metrics.value("updates", 0), 0);
   EXPECT_GT(metrics.value("env_steps", 0), 128);
   EXPECT_TRUE(fs::exists(run_dir_ / "config.yaml"));
   ASSERT_FALSE(fs::is_empty(run_dir_ / "checkpoints"));
   const std::uint64_t version_before = metrics.value("policy_version", 0);
-  const std::int64_t steps_before = metrics.value("env_steps", 0);
+  const std::uint64_t steps_before = metrics.value("env_steps", 0);
 
   // The actors keep their snapshot and wait; a restarted learner resumes from its checkpoint
   // and the version sequence and step counters continue.
   std::this_thread::sleep_for(1s);
-  EXPECT_TRUE(actor0->running() && actor1->running()) << logs();
+  EXPECT_TRUE(actor0->running() && actor1->running()) << state();
   learner = start_learner();
-  const auto resume_deadline = std::chrono::steady_clock::now() + 60s;
-  while (std::chrono::steady_clock::now() < resume_deadline &&
-         seen.min_newest_chunk_version() <= version_before) {
-    ASSERT_TRUE(learner->running()) << logs();
-    std::this_thread::sleep_for(200ms);
-  }
-  EXPECT_GT(seen.min_newest_chunk_version(), version_before) << logs();
+  testing::wait_until(60s, [&] {
+    replace_if_deaf();
+    return !running() || watch.min_newest_chunk_version({0, 1}) > version_before;
+  });
+  ASSERT_TRUE(running()) << state();
+  EXPECT_GT(watch.min_newest_chunk_version({0, 1}), version_before) << state();
   // The resumed learner stored new steps (not only the chunks the test saw in flight).
-  const auto stored_deadline = std::chrono::steady_clock::now() + 30s;
-  while (std::chrono::steady_clock::now() < stored_deadline) {
-    {
-      std::lock_guard<std::mutex> lock(seen.mutex);
-      if (seen.learner_env_steps > static_cast<std::uint64_t>(steps_before)) break;
-    }
-    std::this_thread::sleep_for(100ms);
-  }
+  testing::wait_until(30s, [&] {
+    replace_if_deaf();
+    testing::SeenHeartbeat beat;
+    return watch.heartbeat(msg::ROLE_LEARNER, 0, beat) && beat.env_steps > steps_before;
+  });
   learner->signal(SIGTERM);
-  ASSERT_EQ(learner->wait(60s), 0) << logs();
+  ASSERT_EQ(learner->wait(60s), 0) << state();
   const auto resumed = last_metrics();
-  EXPECT_GT(resumed.value("env_steps", 0), steps_before);
+  EXPECT_GT(resumed.value("env_steps", 0u), steps_before);
   EXPECT_EQ(resumed.value("learner_epoch", 0), 2);
   actor0->signal(SIGTERM);
   actor1->signal(SIGTERM);
-  EXPECT_EQ(actor0->wait(30s), 0) << logs();
-  EXPECT_EQ(actor1->wait(30s), 0) << logs();
+  EXPECT_EQ(actor0->wait(30s), 0) << state();
+  EXPECT_EQ(actor1->wait(30s), 0) << state();
 }
 
 // A learner that spends its budget declares its last snapshot in a reliable announce before it
