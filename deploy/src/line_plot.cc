@@ -241,9 +241,9 @@ void LinePlot::draw_axes(const Range& range) const {
   plwind(range.x_min, range.x_max, range.y_min, range.y_max);
   const auto x_ticks = nice_ticks(range.x_min, range.x_max, 6);
   const auto y_ticks = nice_ticks(range.y_min, range.y_max, 6);
-  static thread_local AxisSteps steps;
-  steps = {x_ticks.size() > 1 ? x_ticks[1] - x_ticks[0] : 1.0,
-           y_ticks.size() > 1 ? y_ticks[1] - y_ticks[0] : 1.0};
+  // PLplot keeps the pointer until the label function is cleared at the end of this function.
+  AxisSteps steps{x_ticks.size() > 1 ? x_ticks[1] - x_ticks[0] : 1.0,
+                  y_ticks.size() > 1 ? y_ticks[1] - y_ticks[0] : 1.0};
   plslabelfunc(label_tick, &steps);
   plwidth(1.0);
   plcol0(kGrid);

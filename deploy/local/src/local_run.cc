@@ -49,17 +49,19 @@ LocalSettings local_settings(const config::Config& config) {
 
 // The agent's config for this process: random mode never leaves prefill, so it never trains.
 // A finetune without a checkpoint to start from is refused here, before SUMO starts.
-agent::AgentConfig local_agent_config(const service::ServiceConfig& config) {
+agent::AgentConfig local_agent_config(const service::ServiceConfig& config,
+                                      const LocalSettings& local,
+                                      const learner::LearnerConfig& settings) {
   agent::AgentConfig agent = config.training_agent("local");
   const bool resumable = CheckpointFiles(open_run(config).checkpoints(), 1000).newest().has_value();
-  if (agent.phase == agent::Phase::kFinetune && !local_settings(config.config()).random &&
-      !resumable && learner::learner_config(config.config()).init_checkpoint.empty()) {
+  if (agent.phase == agent::Phase::kFinetune && !local.random && !resumable &&
+      settings.init_checkpoint.empty()) {
     throw LocalRunError(
         "finetune needs a pretrained agent: set learner.init_checkpoint to a pretraining "
         "run's checkpoint, e.g. --set learner.init_checkpoint=runs/<run>/checkpoints/"
         "ckpt-000000000100.bin");
   }
-  if (local_settings(config.config()).random) {
+  if (local.random) {
     agent.replay.prefill = std::numeric_limits<std::int64_t>::max();
   }
   return agent;
@@ -83,16 +85,17 @@ learner::LearnerCounters read_checkpoint(const fs::path& path,
 // starts SUMO (libsumo allows one simulation per process).
 class LazyEnvironment : public agent::Environment {
  public:
-  LazyEnvironment(const service::ServiceConfig& config,
+  LazyEnvironment(const service::ServiceConfig& config, env::EnvConfig env_config,
                   std::function<void(const env::StepResult&)> observer,
                   std::function<void(const EpisodeRecord&)> episode_observer)
       : config_(config),
+        env_config_(std::move(env_config)),
         observer_(std::move(observer)),
         episode_observer_(std::move(episode_observer)) {}
 
   agent::EnvStep reset() override {
     if (!adapter_) {
-      env_ = std::make_unique<env::Env>(actor::env_config(config_));
+      env_ = std::make_unique<env::Env>(env_config_);
       adapter_ =
           std::make_unique<actor::EnvAdapter>(*env_, actor::EnvAdapter::options_from(config_));
       adapter_->on_result(observer_);
@@ -104,15 +107,15 @@ class LazyEnvironment : public agent::Environment {
 
  private:
   const service::ServiceConfig& config_;
+  const env::EnvConfig env_config_;
   std::function<void(const env::StepResult&)> observer_;
   std::function<void(const EpisodeRecord&)> episode_observer_;
   std::unique_ptr<env::Env> env_;
   std::unique_ptr<actor::EnvAdapter> adapter_;
 };
 
-std::string method_name(const service::ServiceConfig& config, const agent::AgentConfig& agent) {
-  if (local_settings(config.config()).random) return "random";
-  return agent::method_label(agent);
+std::string method_name(const LocalSettings& local, const agent::AgentConfig& agent) {
+  return local.random ? "random" : agent::method_label(agent);
 }
 
 }  // namespace
@@ -121,16 +124,16 @@ struct LocalRun::Impl {
   explicit Impl(const service::ServiceConfig& service)
       : config(service),
         settings(learner::learner_config(service.config())),
-        agent_config(local_agent_config(service)),
-        random(local_settings(service.config()).random),
+        local(local_settings(service.config())),
+        agent_config(local_agent_config(service, local, settings)),
         run(open_run(service)),
         checkpoints(run.checkpoints(), settings.checkpoint_keep),
-        town(env::load_town(actor::env_config(service).town,
-                            actor::env_config(service).town_options)),
+        env_config(actor::env_config(service)),
+        town(env::load_town(env_config.town, env_config.town_options)),
         coverage(town.net,
                  {.segment_m = actor::EnvAdapter::options_from(service).coverage_segment_m}),
         environment(
-            service,
+            service, env_config,
             [this](const env::StepResult& result) {
               if (result.is_first) close_episode();
               coverage.observe(result.ego.pose);
@@ -159,7 +162,7 @@ struct LocalRun::Impl {
       restore_coverage();
       // The ratio is kept over the whole run: what a session stopped during a catch-up still
       // owed is trained first. The random baseline never trains.
-      if (!random) trainer.continue_from(base.env_steps, base.updates);
+      if (!local.random) trainer.continue_from(base.env_steps, base.updates);
       INDRIVE_LOG(kInfo, "local") << "resumed from " << newest->string() << " at " << base.env_steps
                                   << " env steps, " << base.updates << " updates, "
                                   << trainer.replay().size() << " replay steps";
@@ -198,14 +201,11 @@ struct LocalRun::Impl {
     counters.env_steps = env_steps();
     counters.updates = updates();
     counters.policy_version = static_cast<std::uint64_t>(counters.updates);
-    const fs::path staging = run.checkpoints() / "agent-staging.bin";
-    trainer.agent().save_checkpoint(staging);
-    const auto agent_bytes = read_file(staging);
-    fs::remove(staging);
+    const std::vector<std::uint8_t> agent_bytes = trainer.agent().checkpoint_bytes();
     // With the replay, as the learner's: a resumed run trains on the data it had (the random
     // baseline never trains, so its replay is not kept).
     const std::vector<std::uint8_t> replay_bytes =
-        random ? std::vector<std::uint8_t>{} : trainer.replay().to_bytes();
+        local.random ? std::vector<std::uint8_t>{} : trainer.replay().to_bytes();
     const fs::path path =
         checkpoints.save(static_cast<std::uint64_t>(counters.updates),
                          learner::pack_checkpoint(counters, agent_bytes, replay_bytes));
@@ -243,7 +243,7 @@ struct LocalRun::Impl {
     const auto& counters = trainer.counters();
     nlohmann::json record = interval.fields(now);
     record.update({{"episodes", counters.episodes - logged_episodes},
-                   {"random_policy", random},
+                   {"random_policy", local.random},
                    {"non_finite_metrics", non_finite},
                    {"coverage_distinct_per_1k", coverage.distinct_per_window()},
                    {"coverage_fraction_visited", coverage.fraction_visited()},
@@ -276,7 +276,7 @@ struct LocalRun::Impl {
   // of the episodes after its last checkpoint, as metrics.jsonl keeps their lines).
   void write_training_episode(EpisodeRecord record) {
     record.run_id = config.run_id();
-    record.method = method_name(config, agent_config);
+    record.method = method_name(local, agent_config);
     record.task = agent::task_label(agent_config);
     record.train_seed = static_cast<int>(settings.seed);
     record.policy_version = updates();
@@ -331,10 +331,11 @@ struct LocalRun::Impl {
 
   const service::ServiceConfig& config;
   const learner::LearnerConfig settings;  // the learner.* and run.* keys, read once
+  const LocalSettings local;              // the local.* keys
   agent::AgentConfig agent_config;
-  bool random;
   RunDir run;
   CheckpointFiles checkpoints;
+  const env::EnvConfig env_config;
   env::Town town;  // for coverage; the Env loads its own copy when it starts
   env::CoverageTracker coverage;
   EpisodeStats episodes;  // length and reach of the episodes the coverage tracker closed
@@ -366,16 +367,17 @@ const env::CoverageTracker& LocalRun::coverage() const { return impl_->coverage;
 EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const std::string& route,
                                    int episodes, const std::atomic<bool>& stop) {
   const agent::AgentConfig agent_config = config.agent();
-  const bool random = local_settings(config.config()).random;
+  const LocalSettings local = local_settings(config.config());
+  const learner::LearnerConfig settings = learner::learner_config(config.config());
+  const env::EnvConfig env_config = actor::env_config(config);
   const RunDir run = open_run(config);
 
   // The acting policy of the newest checkpoint, or uniform random actions in random mode, as
   // the evaluator drives them (one policy seed per episode).
   std::unique_ptr<actor::EpisodePolicy> policy;
   long long version = 0;
-  if (random) {
-    policy = actor::make_random_policy(
-        static_cast<std::uint64_t>(learner::learner_config(config.config()).seed));
+  if (local.random) {
+    policy = actor::make_random_policy(static_cast<std::uint64_t>(settings.seed));
   } else {
     const auto newest = CheckpointFiles(run.checkpoints(), 1000).newest();
     if (!newest) {
@@ -396,7 +398,7 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
   }
 
   actor::ProtocolGrid grid;
-  const std::string town = actor::env_config(config).town;
+  const std::string town = env_config.town;
   const actor::EvalConfig eval = actor::eval_config(config.config());
   grid.towns = {town};
   grid.routes = {route};
@@ -408,8 +410,7 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
   grid.validate();
 
   // As in the evaluator, episodes end at the route's own step budget (below).
-  env::Env env(
-      actor::protocol_env_config(actor::env_config(config), actor::parse_protocol(eval.protocol)));
+  env::Env env(actor::protocol_env_config(env_config, actor::parse_protocol(eval.protocol)));
   EpisodeCsvWriter csv(run.eval() /
                        ("local-" + actor::town_file_label(town) + "-" + route + ".csv"));
   EvaluationSummary summary;
@@ -423,10 +424,10 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
     if (outcome.stopped) break;
     EpisodeRecord record = actor::protocol_record(spec, outcome);
     record.run_id = config.run_id();
-    record.method = method_name(config, agent_config);
+    record.method = method_name(local, agent_config);
     record.eval_kind = agent_config.phase == agent::Phase::kPretrain ? "zero_shot" : "few_shot";
     record.task = agent::task_label(agent_config);
-    record.train_seed = static_cast<int>(learner::learner_config(config.config()).seed);
+    record.train_seed = static_cast<int>(settings.seed);
     record.policy_version = version;
     csv.write(record);
     if (record.failure_reason == "env_fault") {  // SUMO failed: nothing of the policy
