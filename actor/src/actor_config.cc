@@ -27,6 +27,7 @@ EvalConfig eval_config(const config::Config& c) {
           .learner_silence_s = c.get<double>("eval.learner_silence_s"),
           .continuous = c.get<bool>("eval.continuous"),
           .every_k = c.get<int>("eval.every_k"),
+          .resume = c.get<bool>("eval.resume"),
           .protocol = c.get<std::string>("eval.protocol"),
           .indrive_code_budget_steps = c.get<int>("eval.indrive_code_budget_steps"),
           .budget_speed_mps = c.get<double>("eval.budget_speed_mps"),

@@ -4,10 +4,13 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <tuple>
 
 #include "indrive/actor/actor_config.h"
 #include "indrive/actor/env_adapter.h"
@@ -93,6 +96,11 @@ struct Evaluator::Impl {
     if (!snapshot_file.empty() && source != PolicySource::kSnapshot) {
       throw EvalError("eval.snapshot_file (--snapshot) is given but eval.policy is '" +
                       std::string(to_string(source)) + "'; use --policy snapshot");
+    }
+    if (continuous && eval.resume) {
+      throw EvalError(
+          "eval.resume goes on with one evaluation stopped part-way; a --continuous learning "
+          "curve is not resumed: leave eval.resume off");
     }
     if (continuous && (source != PolicySource::kSnapshot || !snapshot_file.empty())) {
       throw EvalError(
@@ -331,13 +339,74 @@ struct Evaluator::Impl {
         "snapshot v" + std::to_string(snapshot.version()) + " of run " + config.run_id());
   }
 
-  // Runs this evaluator's episodes with the current policy; returns how many finished.
+  // An episode's place in the grid: town, route, density and index within the cell.
+  using EpisodeKey = std::tuple<std::string, std::string, int, int>;
+
+  // With eval.resume, the episodes the results file already holds for this evaluation (an
+  // evaluation stopped or killed part-way goes on where it stopped). Every row must be of
+  // this evaluation (run, method, kind, task, seed, policy version, protocol) and one of this
+  // evaluator's episodes with the same seeds; anything else is an EvalError, since the file
+  // would then mix two evaluations.
+  std::set<EpisodeKey> finished_episodes(std::uint64_t version) const {
+    std::set<EpisodeKey> finished;
+    if (!eval.resume || !std::filesystem::exists(results_file())) return finished;
+    std::map<EpisodeKey, EpisodeSpec> mine;
+    for (const EpisodeSpec& spec : grid.episodes_for(index, count)) {
+      mine[{spec.town, spec.route, spec.density, spec.episode}] = spec;
+    }
+    const std::string file = results_file().string();
+    const auto fail = [&](std::size_t row, const std::string& what) {
+      throw EvalError("eval.resume: row " + std::to_string(row + 1) + " of " + file + " " + what +
+                      "; resume only into the results of the same evaluation, or evaluate " +
+                      "into another run directory");
+    };
+    const std::vector<EpisodeRecord> rows = read_episode_csv(results_file());
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const EpisodeRecord& r = rows[i];
+      const auto differs = [&](const char* field, const std::string& theirs,
+                               const std::string& ours) {
+        if (theirs != ours) {
+          fail(i, std::string("is of another evaluation (") + field + " '" + theirs +
+                      "', this one '" + ours + "')");
+        }
+      };
+      differs("run_id", r.run_id, config.run_id());
+      differs("method", r.method, method);
+      differs("eval_kind", r.eval_kind, eval.kind);
+      differs("task", r.task, task);
+      differs("train_seed", std::to_string(r.train_seed), std::to_string(agent_config.seed));
+      differs("policy_version", std::to_string(r.policy_version), std::to_string(version));
+      differs("protocol", r.protocol, eval.protocol);
+      const EpisodeKey key{r.town, r.route, r.density, r.episode};
+      const auto spec = mine.find(key);
+      if (spec == mine.end()) {
+        fail(i, "(" + r.town + " " + r.route + " density " + std::to_string(r.density) +
+                    " episode " + std::to_string(r.episode) +
+                    ") is not an episode of this evaluator's share of the grid");
+      }
+      if (spec->second.traffic_seed != r.traffic_seed || spec->second.spawn_seed != r.spawn_seed) {
+        fail(i, "has other seeds than the grid gives its episode (run.seed changed?)");
+      }
+      finished.insert(key);
+    }
+    return finished;
+  }
+
+  // Runs this evaluator's episodes with the current policy, less those in `skip`; returns how
+  // many finished.
   int run_episodes(const std::atomic<bool>& stop, std::uint64_t version, std::uint64_t env_steps,
-                   EpisodeCsvWriter* csv, CurveWriter* curve) {
+                   EpisodeCsvWriter* csv, CurveWriter* curve,
+                   const std::set<EpisodeKey>& skip = {}) {
     const auto episodes = grid.episodes_for(index, count);
+    if (!skip.empty()) {
+      INDRIVE_LOG(kInfo, "evaluator")
+          << "evaluator " << index << " resumes: " << skip.size() << " of " << episodes.size()
+          << " episodes are in " << results_file().string() << " already";
+    }
     int done = 0;
     for (const EpisodeSpec& spec : episodes) {
       if (stop.load()) break;
+      if (skip.contains({spec.town, spec.route, spec.density, spec.episode})) continue;
       const EpisodeOutcome outcome = run_protocol_episode(
           *env, *policy, spec,
           protocol_episode_options(config.config(), config.run_dir() / "videos"), stop);
@@ -354,8 +423,9 @@ struct Evaluator::Impl {
       publish(record, version);
       ++done;
     }
-    INDRIVE_LOG(kInfo, "evaluator") << "evaluator " << index << " (" << method << ") ran " << done
-                                    << " of " << episodes.size() << " episodes";
+    INDRIVE_LOG(kInfo, "evaluator")
+        << "evaluator " << index << " (" << method << ") ran " << done << " of "
+        << episodes.size() - skip.size() << " episodes" << (skip.empty() ? "" : " left");
     return done;
   }
 
@@ -399,8 +469,8 @@ struct Evaluator::Impl {
           << ", received " << std::chrono::duration<double>(Clock::now() - start).count()
           << " s after start";
     }
-    EpisodeCsvWriter csv(results_file());
-    run_episodes(stop, version, 0, &csv, nullptr);
+    EpisodeCsvWriter csv(results_file());  // first: it cuts a row a crash left unfinished
+    run_episodes(stop, version, 0, &csv, nullptr, finished_episodes(version));
     if (result_writer) result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
     return 0;
   }

@@ -17,7 +17,8 @@
 #             metrics, configs, evaluation CSVs, the report, and the acting snapshots of the
 #             seeds in --snapshot-seeds ("0").
 # Every stage leaves a DONE file in its run directory and is skipped when it is there, so a
-# chain stopped midway resumes at its stage (a training run resumes from its checkpoints).
+# chain stopped midway resumes at its stage (a training run resumes from its checkpoints, an
+# evaluation of the same snapshot with the same settings from the rows its CSVs hold).
 #
 #   deploy/experiments/paper_grid.sh chain --seed 0 --method disag     # pretrain, zero/few-shot
 #   deploy/experiments/paper_grid.sh chain --seed 0 --method random    # its episodes, zero-shot
@@ -202,8 +203,19 @@ evaluate_once() { # as evaluate
   local dir=$1 kind=$2 source=$3
   shift 3
   if done_mark "$dir"; then say "$dir done already"; return; fi
-  rm -rf "$dir/eval"
+  # What is evaluated: the policy's bytes and every setting. An evaluation of the same stopped
+  # part-way goes on with the episodes its CSVs lack (eval.resume); anything else starts afresh.
+  local id
+  id=$({ if [[ $source == random ]]; then echo random; else sha256sum < "$source"; fi
+         printf '%s\n' "$kind" "$preset" "$seed" "$episodes" "$eval_towns" "$route_set" "$@"; } |
+       sha256sum | cut -d' ' -f1)
+  if [[ -d $dir/eval && -f $dir/evaluation.id && $(< "$dir/evaluation.id") == "$id" ]]; then
+    say "$dir: going on with the episodes not yet in its eval/"
+  else
+    rm -rf "$dir/eval"
+  fi
   mkdir -p "$dir"
+  echo "$id" > "$dir/evaluation.id"
   local policy=(--snapshot "$source")
   [[ $source == random ]] && policy=(--policy random)
   local pids=()
@@ -211,8 +223,8 @@ evaluate_once() { # as evaluate
     "$bin/indrive-actor" --evaluate "${policy[@]}" --run-dir "$dir" --id "$j" --of 2 \
       --set "preset=$preset" --set "run.seed=$seed" --set "eval.kind=$kind" \
       --set "eval.episodes_per_cell=$episodes" --set "eval.towns=$eval_towns" \
-      --set "env.route_set=$route_set" \
-      "$@" --log-level warn > "$dir/evaluator-$j.log" 2>&1 &
+      --set "env.route_set=$route_set" --set eval.resume=true \
+      "$@" --log-level warn >> "$dir/evaluator-$j.log" 2>&1 &
     pids+=($!)
   done
   for pid in "${pids[@]}"; do wait "$pid" || { echo "an evaluator of $dir failed (see $dir/evaluator-*.log)" >&2; exit 1; }; done

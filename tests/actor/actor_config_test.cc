@@ -51,6 +51,7 @@ TEST(ActorConfigTest, EveryEvalKeyReachesItsField) {
                                              "eval.learner_silence_s=0",
                                              "eval.continuous=true",
                                              "eval.every_k=2",
+                                             "eval.resume=true",
                                              "eval.protocol=indrive_code",
                                              "eval.indrive_code_budget_steps=3000",
                                              "eval.budget_speed_mps=2",
@@ -75,6 +76,7 @@ TEST(ActorConfigTest, EveryEvalKeyReachesItsField) {
   EXPECT_DOUBLE_EQ(e.learner_silence_s, 0.0);
   EXPECT_TRUE(e.continuous);
   EXPECT_EQ(e.every_k, 2);
+  EXPECT_TRUE(e.resume);
   EXPECT_EQ(e.protocol, "indrive_code");
   EXPECT_EQ(e.indrive_code_budget_steps, 3000);
   EXPECT_DOUBLE_EQ(e.budget_speed_mps, 2.0);

@@ -597,5 +597,73 @@ TEST(Evaluator, BadInputsAreClearErrorsBeforeAnythingStarts) {
   EXPECT_NE(message.find("--continuous"), std::string::npos) << message;
 }
 
+// eval.resume: an evaluation killed part-way (its last row cut) goes on where it stopped, runs
+// no episode twice, and refuses a results file of another evaluation.
+TEST(Evaluator, AStoppedEvaluationResumesWhereItStoppedAndRefusesAnotherEvaluationsRows) {
+  testing::TempDir dir;
+  const std::vector<std::string> keys = {"eval.policy=oracle", "eval.towns=town02",
+                                         "eval.routes=straight", "eval.densities=[5]",
+                                         "eval.episodes_per_cell=3"};
+  auto with = [&](std::vector<std::string> more) {
+    more.insert(more.begin(), keys.begin(), keys.end());
+    return resolve(dir.path() / "oracle", more);
+  };
+  const std::vector<EpisodeRecord> whole = evaluate(with({}));
+  ASSERT_EQ(whole.size(), 3u);
+  const auto file = dir.path() / "oracle/eval/evaluator-0.csv";
+
+  // As a kill leaves it: the header, the first row and part of the second.
+  std::ifstream in(file);
+  std::string header, first, second;
+  std::getline(in, header);
+  std::getline(in, first);
+  std::getline(in, second);
+  in.close();
+  std::ofstream(file, std::ios::trunc) << header << '\n'
+                                       << first << '\n'
+                                       << second.substr(0, second.size() / 2);
+
+  const std::vector<EpisodeRecord> resumed = evaluate(with({"eval.resume=true"}));
+  ASSERT_EQ(resumed.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(resumed[i].episode, static_cast<int>(i));
+    EXPECT_EQ(resumed[i].success, whole[i].success) << i;
+    EXPECT_EQ(resumed[i].steps, whole[i].steps) << i;
+    EXPECT_EQ(resumed[i].failure_reason, whole[i].failure_reason) << i;
+  }
+  // Finished: resuming again runs nothing and adds no row.
+  EXPECT_EQ(evaluate(with({"eval.resume=true"})).size(), 3u);
+  // Without eval.resume the file is appended to, as before (a second evaluation of its own).
+  EXPECT_EQ(evaluate(with({})).size(), 6u);
+
+  // Rows of another evaluation: refused, naming the field, before any episode runs.
+  std::ofstream(file, std::ios::trunc) << header << '\n' << first << '\n';
+  std::string message;
+  {
+    // The evaluator keeps a reference to its config.
+    const auto config = with({"eval.resume=true", "eval.protocol=indrive_code"});
+    Evaluator evaluator(config, 0, 1);
+    const std::atomic<bool> stop{false};
+    message = testing::error_of<EvalError>([&] { evaluator.run(stop); });
+  }
+  EXPECT_NE(message.find("protocol 'strict', this one 'indrive_code'"), std::string::npos)
+      << message;
+  EXPECT_NE(message.find(file.string()), std::string::npos) << message;
+  EXPECT_EQ(read_episode_csv(file).size(), 1u);
+  // A row of this evaluation that another split of the grid runs (--id 1 --of 2 runs the
+  // second episode of the cell, not the first).
+  std::ofstream(dir.path() / "oracle/eval/evaluator-1.csv") << header << '\n' << first << '\n';
+  {
+    const auto config = with({"eval.resume=true"});
+    Evaluator evaluator(config, 1, 2);
+    const std::atomic<bool> stop{false};
+    message = testing::error_of<EvalError>([&] { evaluator.run(stop); });
+  }
+  EXPECT_NE(message.find("not an episode of this evaluator's share"), std::string::npos) << message;
+  // A learning curve is not resumed.
+  message = setup_error(with({"eval.resume=true", "eval.continuous=true"}));
+  EXPECT_NE(message.find("eval.resume"), std::string::npos) << message;
+}
+
 }  // namespace
 }  // namespace indrive::actor

@@ -205,5 +205,54 @@ TEST(PaperGridChain, CarlaTownsEvaluateUnderBothProtocols) {
   EXPECT_NE(testing::slurp(bad_log).find("--towns must be ours"), std::string::npos);
 }
 
+// An evaluation stopped part-way (an evaluator failed or was killed: no DONE) goes on with the
+// rows it has when the same policy is evaluated with the same settings, and starts afresh when
+// the snapshot changed. Stand-in programs record their calls and exit with a chosen code.
+TEST(PaperGridChain, AStoppedEvaluationGoesOnOnlyForTheSameSnapshot) {
+  testing::TempDir dir;
+  const fs::path bin = dir.path() / "bin", out = dir.path() / "grid";
+  const fs::path calls = dir.path() / "calls", code = dir.path() / "exit-code";
+  for (const std::string program : {"indrive", "indrive-actor", "indrive-train-local"}) {
+    write_text(bin / program, "#!/bin/sh\necho \"$*\" >> \"" + calls.string() +
+                                  "\"\nexit $(cat \"" + code.string() + "\")\n");
+    fs::permissions(bin / program, fs::perms::owner_all);
+  }
+  write_text(out / "s0/pretrain-disag/DONE", "");
+  write_text(out / "s0/pretrain-disag/snapshot.params", "weights");
+  const fs::path eval = out / "s0/zeroshot-disag";
+  int runs = 0;
+  const auto chain = [&](const std::string& exit_code) {
+    write_text(code, exit_code);
+    const fs::path log = dir.path() / ("chain-" + std::to_string(++runs) + ".log");
+    testing::Child run({"/bin/bash", (kSource / "deploy/experiments/paper_grid.sh").string(),
+                        "chain", "--out", out.string(), "--seed", "0", "--method", "disag",
+                        "--stages", "zeroshot", "--bin", bin.string()},
+                       log);
+    const int status = run.wait(60s);  // before the log is read
+    return std::make_pair(status, testing::slurp(log));
+  };
+
+  // The evaluators fail: no DONE; the rows they wrote stay.
+  EXPECT_NE(chain("1").first, 0);
+  EXPECT_FALSE(fs::exists(eval / "DONE"));
+  EXPECT_NE(testing::slurp(calls).find("eval.resume=true"), std::string::npos);
+  write_text(eval / "eval/evaluator-0.csv", "rows of the stopped evaluation\n");
+
+  // Run again, same snapshot: it goes on with them.
+  auto [status, log] = chain("0");
+  ASSERT_EQ(status, 0) << log;
+  EXPECT_NE(log.find("going on with the episodes not yet in its eval/"), std::string::npos) << log;
+  EXPECT_TRUE(fs::exists(eval / "eval/evaluator-0.csv"));
+  EXPECT_TRUE(fs::exists(eval / "DONE"));
+
+  // Another snapshot (retrained): the old rows are dropped.
+  fs::remove(eval / "DONE");
+  write_text(out / "s0/pretrain-disag/snapshot.params", "other weights");
+  std::tie(status, log) = chain("0");
+  ASSERT_EQ(status, 0) << log;
+  EXPECT_EQ(log.find("going on with"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(eval / "eval/evaluator-0.csv"));
+}
+
 }  // namespace
 }  // namespace indrive

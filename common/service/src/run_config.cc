@@ -191,6 +191,10 @@ void declare_eval_keys(config::Schema& schema) {
       .add_bool("eval.wait_for_done", true,
                 "evaluate the learner's last snapshot (wait until it reports done)")
       .add_float("eval.snapshot_timeout_s", 3600.0, "give up when no snapshot comes in time", 1.0)
+      .add_bool("eval.resume", false,
+                "go on with an evaluation stopped part-way: the episodes this evaluator's "
+                "results file holds for the same policy, kind and protocol are not run again "
+                "(the file must hold that evaluation's rows only)")
       .add_float("eval.learner_silence_s", 120.0,
                  "with wait_for_done: evaluate the newest snapshot held, with a warning, once "
                  "the learner has not been heard from for this long (0: wait for it)",

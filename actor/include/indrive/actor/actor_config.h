@@ -47,6 +47,7 @@ struct EvalConfig {
   double learner_silence_s = 120.0;
   bool continuous = false;
   int every_k = 1;
+  bool resume = false;  // skip the episodes the results file holds for this evaluation
   // How an episode is judged (eval_protocol_episode.h).
   std::string protocol = "strict";  // strict or indrive_code
   int indrive_code_budget_steps = 30000;
