@@ -289,4 +289,34 @@ RestoredRun restore_newest(const std::vector<fs::path>& files, const agent::Agen
   throw CheckpointError(message);
 }
 
+RunStart start_run(const std::vector<fs::path>& files, const std::string& init_checkpoint,
+                   const agent::AgentConfig& config, const agent::ReplayOptions& replay_options,
+                   const std::string& run_id) {
+  RunStart start;
+  if (!files.empty()) {
+    start.from = StartedFrom::kCheckpoint;
+    start.restored = restore_newest(files, config, replay_options, run_id);
+  } else if (!init_checkpoint.empty()) {
+    if (!fs::exists(init_checkpoint)) {
+      throw CheckpointError("learner.init_checkpoint '" + init_checkpoint +
+                            "' does not exist: point it at a pretraining run's checkpoint "
+                            "(runs/<run>/checkpoints/ckpt-*.bin)");
+    }
+    const std::vector<std::uint8_t> bytes = read_file(init_checkpoint);
+    std::vector<std::uint8_t> agent_bytes;
+    try {
+      unpack_checkpoint(bytes, agent_bytes);
+    } catch (const CheckpointError&) {
+      agent_bytes = bytes;  // a bare agent checkpoint
+    }
+    start.from = StartedFrom::kInitCheckpoint;
+    start.restored.file = init_checkpoint;
+    start.restored.agent = std::make_unique<agent::Agent>(config);
+    start.restored.agent->load_checkpoint(agent_bytes, init_checkpoint);
+    INDRIVE_LOG(kInfo, "learner") << "initialised from " << init_checkpoint;
+  }
+  ++start.restored.counters.learner_epoch;
+  return start;
+}
+
 }  // namespace indrive::learner

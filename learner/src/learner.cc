@@ -114,41 +114,23 @@ struct Learner::Impl {
             .seed = agent_config.replay.seed + agent_config.seed};
   }
 
-  // Restores the newest intact checkpoint of this run, or a finetune's initial checkpoint.
+  // Restores the newest intact checkpoint of this run, or a finetune's initial checkpoint
+  // (start_run).
   void resume() {
-    const std::vector<fs::path> files = checkpoints.list();
-    if (!files.empty()) {
-      resume_from(files);
-    } else if (const std::string& init = settings.init_checkpoint; !init.empty()) {
-      const auto bytes = read_file(init);
-      std::vector<std::uint8_t> agent_bytes;
-      try {
-        unpack_checkpoint(bytes, agent_bytes);
-      } catch (const CheckpointError&) {
-        agent_bytes = bytes;  // a bare agent checkpoint
-      }
-      agent = std::make_unique<agent::Agent>(agent_config);
-      agent->load_checkpoint(agent_bytes, init);
-      INDRIVE_LOG(kInfo, "learner") << "initialised from " << init;
-    } else {
-      agent = std::make_unique<agent::Agent>(agent_config);
+    RunStart start = start_run(checkpoints.list(), settings.init_checkpoint, agent_config,
+                               replay_options(agent_config), config.run_id());
+    agent = start.restored.agent ? std::move(start.restored.agent)
+                                 : std::make_unique<agent::Agent>(agent_config);
+    stats.counters = start.restored.counters;
+    if (start.from == StartedFrom::kCheckpoint) {
+      replay = std::move(*start.restored.replay);
+      stats.restored_replay_steps = replay.size();
+      stats.resumed_from = start.restored.file;
+      stats.skipped_checkpoints = start.restored.skipped;
+      latest_checkpoint = start.restored.file;
     }
-    ++stats.counters.learner_epoch;
     // Snapshots published after the newest checkpoint used versions up to the reserved mark.
     stats.counters.policy_version = std::max(stats.counters.policy_version, versions.reserved());
-  }
-
-  // Continues from the newest intact checkpoint (restore_newest).
-  void resume_from(const std::vector<fs::path>& files) {
-    RestoredRun restored =
-        restore_newest(files, agent_config, replay_options(agent_config), config.run_id());
-    stats.counters = restored.counters;
-    agent = std::move(restored.agent);
-    replay = std::move(*restored.replay);
-    stats.restored_replay_steps = replay.size();
-    stats.resumed_from = restored.file;
-    stats.skipped_checkpoints = restored.skipped;
-    latest_checkpoint = restored.file;
   }
 
   // Writes a checkpoint; returns whether it was written. A write that fails (disk full, I/O

@@ -149,34 +149,26 @@ struct LocalRun::Impl {
     resume();
   }
 
+  // Starts where start_run says, as the learner does: the newest intact checkpoint (agent,
+  // replay, counters), else the finetune's initial checkpoint, else nothing.
   void resume() {
-    std::vector<std::uint8_t> agent_bytes;
-    if (const auto newest = checkpoints.newest()) {
-      std::vector<std::uint8_t> replay_bytes;
-      base = read_checkpoint(*newest, agent_bytes, &replay_bytes);
-      trainer.load_agent(agent_bytes, newest->string());
-      // The replay goes on where it stopped: no second random prefill in the middle of a run.
-      if (!replay_bytes.empty()) {
-        trainer.replay().load(replay_bytes, newest->string() + " (replay)");
-      }
-      restore_coverage();
-      // The ratio is kept over the whole run: what a session stopped during a catch-up still
-      // owed is trained first. The random baseline never trains.
-      if (!local.random) trainer.continue_from(base.env_steps, base.updates);
-      INDRIVE_LOG(kInfo, "local") << "resumed from " << newest->string() << " at " << base.env_steps
-                                  << " env steps, " << base.updates << " updates, "
-                                  << trainer.replay().size() << " replay steps";
-    } else if (const std::string& init = settings.init_checkpoint; !init.empty()) {
-      if (!fs::exists(init)) {
-        throw LocalRunError("learner.init_checkpoint '" + init +
-                            "' does not exist: point it at a pretraining run's checkpoint "
-                            "(runs/<run>/checkpoints/ckpt-*.bin)");
-      }
-      read_checkpoint(init, agent_bytes);
-      trainer.load_agent(agent_bytes, init);
-      INDRIVE_LOG(kInfo, "local") << "initialised from " << init;
+    learner::RunStart start =
+        learner::start_run(checkpoints.list(), settings.init_checkpoint, agent_config,
+                           trainer.replay().options(), config.run_id());
+    base = start.restored.counters;
+    if (start.restored.agent) {
+      trainer.load_agent(start.restored.agent->checkpoint_bytes(), start.restored.file.string());
     }
-    ++base.learner_epoch;
+    if (start.from != learner::StartedFrom::kCheckpoint) return;
+    // The replay goes on where it stopped: no second random prefill in the middle of a run.
+    trainer.replay() = std::move(*start.restored.replay);
+    restore_coverage();
+    // The ratio is kept over the whole run: what a session stopped during a catch-up still
+    // owed is trained first. The random baseline never trains.
+    if (!local.random) trainer.continue_from(base.env_steps, base.updates);
+    INDRIVE_LOG(kInfo, "local") << "resumed from " << start.restored.file.string() << " at "
+                                << base.env_steps << " env steps, " << base.updates << " updates, "
+                                << trainer.replay().size() << " replay steps";
   }
 
   // A resumed run continues the coverage of its earlier sessions (coverage.csv).

@@ -402,5 +402,28 @@ TEST(LocalRunTest, FinetuneWithoutACheckpointIsRefused) {
       LocalRunError);
 }
 
+// A run starts as the learner does (learner::start_run): a newest checkpoint cut short by a
+// crash is set aside, and the run goes on from the one before it.
+TEST(LocalRunTest, AResumedRunSkipsADamagedNewestCheckpoint) {
+  testing::TempDir dir;
+  const fs::path run_dir = dir.path() / "random";
+  std::atomic<bool> stop{false};
+  {
+    const auto config = make_config(run_dir, {"local.random=true", "run.budget_env_steps=300"});
+    LocalRun run(config);  // keeps a reference to its config
+    run.train(stop);
+  }
+  const fs::path intact = CheckpointFiles(run_dir / "checkpoints", 10).newest().value();
+  const fs::path newer = run_dir / "checkpoints" / "ckpt-000000000007.bin";
+  const auto bytes = read_file(intact);
+  atomic_write(newer, std::span<const std::uint8_t>(bytes.data(), bytes.size() / 2));
+
+  const auto config = make_config(run_dir, {"local.random=true", "run.budget_env_steps=400"});
+  LocalRun resumed(config);
+  EXPECT_EQ(resumed.env_steps(), 300);
+  EXPECT_FALSE(fs::exists(newer));
+  EXPECT_TRUE(fs::exists(newer.string() + ".damaged"));
+}
+
 }  // namespace
 }  // namespace indrive::local

@@ -69,4 +69,22 @@ RestoredRun restore_newest(const std::vector<std::filesystem::path>& files,
                            const agent::AgentConfig& config,
                            const agent::ReplayOptions& replay_options, const std::string& run_id);
 
+// Where a training run starts, for indrive-learner and indrive-train-local alike:
+//   - its newest intact checkpoint among `files` (restore_newest: counters, agent, replay);
+//   - else the agent of `init_checkpoint` when one is named (a learner checkpoint or a bare
+//     agent checkpoint, as a finetune starts from a pretraining), with zero counters and no
+//     replay;
+//   - else nothing: counters zero, no agent, no replay.
+// counters.learner_epoch is one more than the checkpoint's: this start counts. Throws
+// CheckpointError when init_checkpoint does not exist or cannot be read, or when no checkpoint
+// restores (restore_newest).
+enum class StartedFrom { kCheckpoint, kInitCheckpoint, kNothing };
+struct RunStart {
+  StartedFrom from = StartedFrom::kNothing;
+  RestoredRun restored;  // file: the checkpoint it came from (init_checkpoint for kInitCheckpoint)
+};
+RunStart start_run(const std::vector<std::filesystem::path>& files,
+                   const std::string& init_checkpoint, const agent::AgentConfig& config,
+                   const agent::ReplayOptions& replay_options, const std::string& run_id);
+
 }  // namespace indrive::learner
