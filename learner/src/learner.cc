@@ -23,6 +23,7 @@
 #include "indrive/learner/learner_config.h"
 #include "indrive/learner/rate_limiter.h"
 #include "indrive/learner/snapshot_publisher.h"
+#include "indrive/learner/training_episodes.h"
 #include "indrive/nn/kernels.h"
 #include "indrive/service/training_metrics.h"
 
@@ -63,7 +64,10 @@ struct Learner::Impl {
                 .width = agent_config.world_model.image,
                 .phase = service.wire_phase(),
                 .with_rewards = agent_config.phase != agent::Phase::kPretrain}),
-        metrics(run.metrics_path()) {
+        metrics(run.metrics_path()),
+        train_episodes(run.train_episodes_path(), {.method = agent::method_label(agent_config),
+                                                   .task = agent::task_label(agent_config),
+                                                   .train_seed = static_cast<int>(settings.seed)}) {
     config.config().write_yaml(run.config_path());
 
     resume();
@@ -186,27 +190,7 @@ struct Learner::Impl {
     ++interval_episodes;
     interval_successes += result.success() ? 1 : 0;
     episode_stats.add(result.steps(), result.reach_segments());
-    write_training_episode(result);
-  }
-
-  // One row of train-episodes.csv per training actor's finished episode (under results_mutex).
-  // A failure to write is logged once and does not stop training.
-  void write_training_episode(const msg::EpisodeResult& result) {
-    try {
-      if (!train_episodes) train_episodes.emplace(run.train_episodes_path());
-      EpisodeRecord row = dds::episode_fields(result);
-      row.method = agent::method_label(agent_config);
-      row.eval_kind = "training";
-      row.task = agent::task_label(agent_config);
-      row.train_seed = static_cast<int>(settings.seed);
-      row.episode = static_cast<int>(train_episodes->rows());
-      train_episodes->write(row);
-    } catch (const std::exception& error) {
-      if (!train_episodes_failed) {
-        INDRIVE_LOG(kError, "learner") << "training episodes are not recorded: " << error.what();
-      }
-      train_episodes_failed = true;
-    }
+    train_episodes.write(dds::episode_fields(result));  // one row per finished episode
   }
 
   // Moves queued chunks into replay; returns whether there were any.
@@ -555,8 +539,7 @@ struct Learner::Impl {
   std::mutex results_mutex;
   std::uint64_t interval_episodes = 0, interval_successes = 0;  // under results_mutex
   EpisodeStats episode_stats;                                   // under results_mutex
-  std::optional<EpisodeCsvWriter> train_episodes;  // train-episodes.csv, under results_mutex
-  bool train_episodes_failed = false;              // under results_mutex
+  TrainingEpisodes train_episodes;  // train-episodes.csv, under results_mutex
   agent::TrainMetrics last_metrics;
   LearnerStats stats;
   std::function<void(const std::string&)> progress;

@@ -24,6 +24,7 @@
 #include "indrive/envserver/town.h"
 #include "indrive/learner/learner.h"
 #include "indrive/learner/learner_config.h"
+#include "indrive/learner/training_episodes.h"
 #include "indrive/nn/kernels.h"
 #include "indrive/service/training_metrics.h"
 
@@ -268,15 +269,8 @@ struct LocalRun::Impl {
   // of the episodes after its last checkpoint, as metrics.jsonl keeps their lines).
   void write_training_episode(EpisodeRecord record) {
     record.run_id = config.run_id();
-    record.method = method_name(local, agent_config);
-    record.task = agent::task_label(agent_config);
-    record.train_seed = static_cast<int>(settings.seed);
     record.policy_version = updates();
-    // Opened at the first episode (a run that only reloads or reports writes none); a resumed
-    // run numbers its episodes on from the rows there.
-    if (!train_episodes) train_episodes.emplace(run.train_episodes_path());
-    record.episode = static_cast<int>(train_episodes->rows());
-    train_episodes->write(record);
+    train_episodes.write(std::move(record));
   }
 
   // Closes the coverage tracker's episode (the steps observed since the last reset) and counts
@@ -341,7 +335,11 @@ struct LocalRun::Impl {
   Clock::time_point last_checkpoint{};
   service::MetricsInterval interval;  // since the last metrics line
   std::int64_t logged_episodes = 0;
-  std::optional<EpisodeCsvWriter> train_episodes;  // train-episodes.csv
+  learner::TrainingEpisodes train_episodes{run.train_episodes_path(),
+                                           {.method = method_name(local, agent_config),
+                                            .task = agent::task_label(agent_config),
+                                            .train_seed = static_cast<int>(settings.seed)},
+                                           "local"};
 };
 
 LocalRun::LocalRun(const service::ServiceConfig& config) : impl_(std::make_unique<Impl>(config)) {}
