@@ -68,6 +68,50 @@ std::vector<EpisodeRecord> evaluate(const service::ServiceConfig& config) {
   return read_episode_csv(evaluator.results_file());
 }
 
+// [method][{town, route}] -> {episodes, successes}, counted by hand from the rows.
+using ByHand =
+    std::map<std::string, std::map<std::pair<std::string, std::string>, std::pair<int, int>>>;
+
+// The report's cells, from the same rows: one seed and one density, so SR = successes / n.
+void expect_report_matches(const std::vector<EpisodeRecord>& rows, const ByHand& by_hand) {
+  const deploy::Report report = deploy::aggregate(rows);
+  const deploy::Table& table = report.tables.at({"strict", "zero_shot", "exploration"});
+  EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "right_loop"}));
+  EXPECT_EQ(table.methods, (std::vector<std::string>{"oracle", "random"}));
+  const std::string csv = deploy::render_csv(report);
+  const std::string md = deploy::render_markdown(report, "town01", "town02");
+  for (const auto& [method, cells] : by_hand) {
+    std::map<std::string, double> town_sum;
+    for (const auto& [key, counts] : cells) {
+      const auto& [town, route] = key;
+      const deploy::CellStats& cell = table.cells.at(method).at(town).at(route);
+      const double sr = 100.0 * counts.second / counts.first;
+      EXPECT_EQ(cell.episodes, 2);
+      EXPECT_EQ(cell.successes, counts.second);
+      EXPECT_DOUBLE_EQ(cell.sr, sr);
+      town_sum[town] += sr;
+      char line[160];
+      std::snprintf(line, sizeof(line), "zero_shot,exploration,%s,%s,%s,1,2,%d,%.3f,%.3f,",
+                    method.c_str(), town.c_str(), route.c_str(), counts.second, sr, 100.0 - sr);
+      EXPECT_NE(csv.find(line), std::string::npos) << line << "\n" << csv;
+    }
+    // Average over the two routes per town and the town01 - town02 gap.
+    char average[128];
+    std::snprintf(average, sizeof(average), "| %s | %.1f | %.1f | %.1f |", method.c_str(),
+                  town_sum["town01"] / 2.0, town_sum["town02"] / 2.0,
+                  town_sum["town01"] / 2.0 - town_sum["town02"] / 2.0);
+    EXPECT_NE(md.find(average), std::string::npos) << average << "\n" << md;
+  }
+  // Random episodes fail, and their reasons are counted per route.
+  int random_failures = 0;
+  for (const auto& [town, routes] : table.failures.at("random")) {
+    for (const auto& [route, reasons] : routes) {
+      for (const auto& [reason, n] : reasons) random_failures += n;
+    }
+  }
+  EXPECT_EQ(random_failures, 8);
+}
+
 TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
   testing::TempDir dir;
   const std::vector<std::string> grid_keys = {
@@ -95,8 +139,7 @@ TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
   env::Env env(env_config);
   auto oracle = make_oracle_policy({});
   auto random = make_random_policy(4);  // run.seed
-  // [method][{town, route}] -> {episodes, successes}, counted by hand from the rows.
-  std::map<std::string, std::map<std::pair<std::string, std::string>, std::pair<int, int>>> by_hand;
+  ByHand by_hand;
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const EpisodeRecord& row = rows[i];
     const EpisodeSpec& spec = specs[i % specs.size()];
@@ -141,43 +184,7 @@ TEST(Evaluator, GridRowsMatchTheirEpisodesAndTheReportCellsMatchTheRows) {
   for (const auto& [key, counts] : by_hand["oracle"]) EXPECT_EQ(counts.second, 2) << key.first;
   for (const auto& [key, counts] : by_hand["random"]) EXPECT_EQ(counts.second, 0) << key.first;
 
-  // The report's cells, from the same rows: one seed and one density, so SR = successes / n.
-  const deploy::Report report = deploy::aggregate(rows);
-  const deploy::Table& table = report.tables.at({"strict", "zero_shot", "exploration"});
-  EXPECT_EQ(table.routes, (std::vector<std::string>{"straight", "right_loop"}));
-  EXPECT_EQ(table.methods, (std::vector<std::string>{"oracle", "random"}));
-  const std::string csv = deploy::render_csv(report);
-  const std::string md = deploy::render_markdown(report, "town01", "town02");
-  for (const auto& [method, cells] : by_hand) {
-    std::map<std::string, double> town_sum;
-    for (const auto& [key, counts] : cells) {
-      const auto& [town, route] = key;
-      const deploy::CellStats& cell = table.cells.at(method).at(town).at(route);
-      const double sr = 100.0 * counts.second / counts.first;
-      EXPECT_EQ(cell.episodes, 2);
-      EXPECT_EQ(cell.successes, counts.second);
-      EXPECT_DOUBLE_EQ(cell.sr, sr);
-      town_sum[town] += sr;
-      char line[160];
-      std::snprintf(line, sizeof(line), "zero_shot,exploration,%s,%s,%s,1,2,%d,%.3f,%.3f,",
-                    method.c_str(), town.c_str(), route.c_str(), counts.second, sr, 100.0 - sr);
-      EXPECT_NE(csv.find(line), std::string::npos) << line << "\n" << csv;
-    }
-    // Average over the two routes per town and the town01 - town02 gap.
-    char average[128];
-    std::snprintf(average, sizeof(average), "| %s | %.1f | %.1f | %.1f |", method.c_str(),
-                  town_sum["town01"] / 2.0, town_sum["town02"] / 2.0,
-                  town_sum["town01"] / 2.0 - town_sum["town02"] / 2.0);
-    EXPECT_NE(md.find(average), std::string::npos) << average << "\n" << md;
-  }
-  // Random episodes fail, and their reasons are counted per route.
-  int random_failures = 0;
-  for (const auto& [town, routes] : table.failures.at("random")) {
-    for (const auto& [route, reasons] : routes) {
-      for (const auto& [reason, n] : reasons) random_failures += n;
-    }
-  }
-  EXPECT_EQ(random_failures, 8);
+  expect_report_matches(rows, by_hand);
 }
 
 TEST(Evaluator, SnapshotFileIsEvaluatedWithoutALearner) {

@@ -30,6 +30,49 @@ namespace fs = std::filesystem;
 using testing::Child;
 using testing::slurp;
 
+// The watch's participant can come out deaf to a learner that both actors hear (a CI run on
+// 2026-12-07 under load: no snapshot, no heartbeat and none of the injected chunks in 60 s,
+// the actors switching snapshots throughout). Like the services' own participants, it is
+// replaced when it has not heard the learner, or its chunk writer has not found the learner's
+// reader, for 5 s while the actors are heard. Call check() while waiting.
+class LearnerHearing {
+ public:
+  explicit LearnerHearing(testing::ProcessWatch& watch) : watch_(watch) {}
+  void check() {
+    const double now = watch_.now_s();
+    testing::SeenHeartbeat beat;
+    const bool heard = watch_.heartbeat(msg::ROLE_LEARNER, 0, beat) && now - beat.time_s < 2.0;
+    // Its own reader and the learner's.
+    if ((heard && watch_.chunk_writer().matched() >= 2) || watch_.chunks().empty()) {
+      deaf_since_ = -1.0;
+    } else if (deaf_since_ < 0.0) {
+      deaf_since_ = now;
+    } else if (now - deaf_since_ > 5.0) {
+      watch_.replace("the learner unheard or unmatched for 5 s while the actors are heard");
+      deaf_since_ = -1.0;
+    }
+  }
+
+ private:
+  testing::ProcessWatch& watch_;
+  double deaf_since_ = -1.0;
+};
+
+// A chunk of another run and a chunk of run "itest" with a bad checksum (actor 9, two steps).
+std::vector<msg::TrajectoryChunk> foreign_and_corrupt_chunks() {
+  std::vector<msg::TrajectoryChunk> chunks;
+  const std::vector<std::uint8_t> frame(32 * 32, 1);
+  for (const char* run : {"another-run", "itest"}) {
+    actor::ChunkBuilder builder(
+        {.run_id = run, .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
+    builder.add({.frame = frame, .is_first = true, .episode_step = 0});
+    builder.add({.frame = frame, .episode_step = 1});
+    chunks.push_back(builder.take());
+  }
+  chunks.back().checksum(chunks.back().checksum() ^ 1u);
+  return chunks;
+}
+
 class ServiceTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -111,32 +154,13 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
   auto actor1 = start_actor(1);
   const auto state = [&] { return watch.describe() + logs(); };
 
-  // The watch's participant can come out deaf to a learner that both actors hear (a CI run on
-  // 2026-12-07 under load: no snapshot, no heartbeat and none of the injected chunks in 60 s,
-  // the actors switching snapshots throughout). Like the services' own participants, it is
-  // replaced when it has not heard the learner, or its chunk writer has not found the
-  // learner's reader, for 5 s while the actors are heard.
-  double deaf_since = -1.0;
-  const auto replace_if_deaf = [&] {
-    const double now = watch.now_s();
-    testing::SeenHeartbeat beat;
-    const bool heard = watch.heartbeat(msg::ROLE_LEARNER, 0, beat) && now - beat.time_s < 2.0;
-    // Its own reader and the learner's.
-    if ((heard && watch.chunk_writer().matched() >= 2) || watch.chunks().empty()) {
-      deaf_since = -1.0;
-    } else if (deaf_since < 0.0) {
-      deaf_since = now;
-    } else if (now - deaf_since > 5.0) {
-      watch.replace("the learner unheard or unmatched for 5 s while the actors are heard");
-      deaf_since = -1.0;
-    }
-  };
+  LearnerHearing hearing(watch);
   const auto running = [&] { return learner->running() && actor0->running() && actor1->running(); };
 
   // Both actors must act with a snapshot of version >= 2 (they start with the random policy,
   // version 0), and the watch must hear the learner's snapshots and heartbeats.
   testing::wait_until(100s, [&] {
-    replace_if_deaf();
+    hearing.check();
     return !running() || (watch.min_newest_chunk_version({0, 1}) >= 2 &&
                           watch.newest_snapshot() >= 2 && watch.chunk_writer().matched() >= 2);
   });
@@ -159,19 +183,9 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
 
   // A chunk of another run and a chunk with a bad checksum: dropped, counted, no crash. Written
   // once the watch's writer has found the learner's reader (checked just above).
-  actor::ChunkBuilder builder(
-      {.run_id = "another-run", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
-  std::vector<std::uint8_t> frame(32 * 32, 1);
-  builder.add({.frame = frame, .is_first = true, .episode_step = 0});
-  builder.add({.frame = frame, .episode_step = 1});
-  ASSERT_TRUE(watch.chunk_writer().write(builder.take()));
-  actor::ChunkBuilder ours(
-      {.run_id = "itest", .actor_id = 9, .height = 32, .width = 32, .chunk_length = 2});
-  ours.add({.frame = frame, .is_first = true, .episode_step = 0});
-  ours.add({.frame = frame, .episode_step = 1});
-  auto corrupt = ours.take();
-  corrupt.checksum(corrupt.checksum() ^ 1u);
-  ASSERT_TRUE(watch.chunk_writer().write(corrupt));
+  for (const auto& chunk : foreign_and_corrupt_chunks()) {
+    ASSERT_TRUE(watch.chunk_writer().write(chunk));
+  }
   EXPECT_TRUE(watch.chunk_writer().wait_for_acknowledgments(10000ms)) << state();
   // Until a metrics line counts both (one comes every second), not for a fixed time.
   testing::wait_until(60s, [&] {
@@ -201,14 +215,14 @@ TEST_F(ServiceTest, ActorsSwitchToRisingSnapshotsAndBadChunksAreDropped) {
   EXPECT_TRUE(actor0->running() && actor1->running()) << state();
   learner = start_learner();
   testing::wait_until(60s, [&] {
-    replace_if_deaf();
+    hearing.check();
     return !running() || watch.min_newest_chunk_version({0, 1}) > version_before;
   });
   ASSERT_TRUE(running()) << state();
   EXPECT_GT(watch.min_newest_chunk_version({0, 1}), version_before) << state();
   // The resumed learner stored new steps (not only the chunks the test saw in flight).
   testing::wait_until(30s, [&] {
-    replace_if_deaf();
+    hearing.check();
     testing::SeenHeartbeat beat;
     return watch.heartbeat(msg::ROLE_LEARNER, 0, beat) && beat.env_steps > steps_before;
   });
