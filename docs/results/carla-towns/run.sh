@@ -53,7 +53,7 @@ deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --see
 # replay ratio 512, then evaluated like the zero-shot), side by side, one core each; on
 # 2026-12-07, about 70 minutes of training each beside other work. Their `indrive_code`
 # evaluations were run later the same day by the chain command (stage fewshot, which skips what
-# is done): 26 minutes for LF and 27 for CA on two cores.
+# is done): 25 minutes each on two cores.
 for t in lane_following collision_avoidance; do
   deploy/experiments/paper_grid.sh grid --towns carla --out runs/carla-grid --seeds 0 --methods disag \
     --stages "pretrain fewshot" --task "$t" --episodes 50 &
