@@ -244,8 +244,9 @@ TEST(Evaluator, ARunDirectoryAsTheSnapshotMeansItsFinalSnapshot) {
   }
   const auto empty = dir.path() / "empty-run";
   std::filesystem::create_directories(empty);
+  const auto empty_config = evaluate(empty);
   const std::string message =
-      testing::error_of<EvalError>([&] { Evaluator evaluator(evaluate(empty), 0, 1); });
+      testing::error_of<EvalError>([&] { Evaluator evaluator(empty_config, 0, 1); });
   EXPECT_NE(message.find("without a final-snapshot.params"), std::string::npos) << message;
   EXPECT_NE(message.find("eval/snapshot-v<N>.params"), std::string::npos) << message;
 }

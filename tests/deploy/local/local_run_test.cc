@@ -397,9 +397,9 @@ TEST(LocalRunTest, EvaluationEndsEpisodesAtTheRouteBudgetNotTheEnvTimeLimit) {
 // starts.
 TEST(LocalRunTest, FinetuneWithoutACheckpointIsRefused) {
   testing::TempDir dir;
-  EXPECT_THROW(
-      LocalRun(make_config(dir.path() / "orphan", {"agent.phase=finetune", "env.route=straight"})),
-      LocalRunError);
+  const auto config =
+      make_config(dir.path() / "orphan", {"agent.phase=finetune", "env.route=straight"});
+  EXPECT_THROW(LocalRun{config}, LocalRunError);
 }
 
 // A run starts as the learner does (learner::start_run): a newest checkpoint cut short by a

@@ -47,7 +47,9 @@ class Evaluator {
   // Checks the inputs (grid names, policy source, head, snapshot file) and sets up the
   // environment, and DDS only when a learner's snapshot is evaluated. Throws EvalError,
   // dds::DdsError or the envserver's errors with what is wrong.
+  // `config` is kept by reference and must outlive the evaluator (a temporary is refused).
   Evaluator(const service::ServiceConfig& config, int index, int count);
+  Evaluator(service::ServiceConfig&&, int, int) = delete;
   ~Evaluator();
   Evaluator(const Evaluator&) = delete;
   Evaluator& operator=(const Evaluator&) = delete;

@@ -33,7 +33,9 @@ struct ActorStats {
 class TrainingActor {
  public:
   // Sets up DDS (throws dds::DdsError) and the environment (throws the envserver's errors).
+  // `config` is kept by reference and must outlive the actor (a temporary is refused).
   TrainingActor(const service::ServiceConfig& config, std::uint32_t id);
+  TrainingActor(service::ServiceConfig&&, std::uint32_t) = delete;
   ~TrainingActor();
   TrainingActor(const TrainingActor&) = delete;
   TrainingActor& operator=(const TrainingActor&) = delete;

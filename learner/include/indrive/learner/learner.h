@@ -53,7 +53,9 @@ class Learner {
   // renamed to <name>.damaged), and sets up DDS. Throws CheckpointError listing each file and
   // its fault when there are checkpoints but none restores, and agent::AgentError,
   // dds::DdsError or IoError with what is wrong.
+  // `config` is kept by reference and must outlive the learner (a temporary is refused).
   explicit Learner(const service::ServiceConfig& config);
+  explicit Learner(service::ServiceConfig&&) = delete;
   ~Learner();
   Learner(const Learner&) = delete;
   Learner& operator=(const Learner&) = delete;

@@ -43,7 +43,9 @@ class LocalRun {
   // from the newest checkpoint of the run, or (finetune) starts from learner.init_checkpoint.
   // Throws LocalRunError, config errors, agent::AgentError, the learner's CheckpointError or the
   // envserver's errors with what is wrong.
+  // `config` is kept by reference and must outlive the run (a temporary is refused).
   explicit LocalRun(const service::ServiceConfig& config);
+  explicit LocalRun(service::ServiceConfig&&) = delete;
   ~LocalRun();
   LocalRun(const LocalRun&) = delete;
   LocalRun& operator=(const LocalRun&) = delete;
