@@ -59,6 +59,14 @@ for t in lane_following collision_avoidance; do
     --stages "pretrain fewshot" --task "$t" --episodes 50 &
 done
 wait
+# DreamerV3 from scratch on carla_town01's routes at the same total budget (110,000 task
+# steps), LF and CA side by side, one core each; on 2026-12-07 23-27 minutes of training
+# each, then both protocols' evaluations.
+for t in lane_following collision_avoidance; do
+  deploy/experiments/paper_grid.sh dreamer --towns carla --out runs/carla-grid --seed 0 --task "$t" \
+    --episodes 50 &
+done
+wait
 
 # The page: each evaluation's CSV under sanity/eval/ and shipped/eval/ with their reports, and
 # the grid's runs, CSVs, the snapshots of seeds 0-2, pretraining summary and report.
