@@ -289,6 +289,50 @@ RestoredRun restore_newest(const std::vector<fs::path>& files, const agent::Agen
   throw CheckpointError(message);
 }
 
+bool looks_like_learner_checkpoint(std::span<const std::uint8_t> bytes) {
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  return text.starts_with(kCheckpointMagicPrefix);
+}
+
+RestoredRun load_agent_checkpoint(const fs::path& file, const agent::AgentConfig& config) {
+  if (!fs::exists(file)) throw CheckpointError("checkpoint " + file.string() + " does not exist");
+  const std::vector<std::uint8_t> bytes = read_file(file);
+  RestoredRun loaded;
+  loaded.file = file;
+  std::vector<std::uint8_t> agent_bytes;
+  if (looks_like_learner_checkpoint(bytes)) {
+    try {
+      loaded.counters = unpack_checkpoint(bytes, agent_bytes);
+    } catch (const CheckpointError& error) {
+      throw CheckpointError(file.string() + ": " + error.what());
+    }
+  }
+  loaded.agent = std::make_unique<agent::Agent>(config);
+  loaded.agent->load_checkpoint(agent_bytes.empty() ? bytes : agent_bytes, file.string());
+  return loaded;
+}
+
+RestoredRun load_newest_agent(const std::vector<fs::path>& files,
+                              const agent::AgentConfig& config) {
+  std::string faults;
+  std::uint64_t skipped = 0;
+  for (auto file = files.rbegin(); file != files.rend(); ++file) {
+    try {
+      RestoredRun loaded = load_agent_checkpoint(*file, config);
+      loaded.skipped = skipped;
+      return loaded;
+    } catch (const std::exception& error) {  // CheckpointError, agent::AgentError, IoError
+      ++skipped;
+      faults += "\n  " + file->string() + ": " + error.what();
+      INDRIVE_LOG(kWarn, "learner")
+          << "checkpoint " << file->string() << " does not load and is skipped: " << error.what();
+    }
+  }
+  throw CheckpointError(files.empty() ? std::string("no checkpoint to load")
+                                      : "no checkpoint loads (" + std::to_string(skipped) +
+                                            " tried):" + faults);
+}
+
 RunStart start_run(const std::vector<fs::path>& files, const std::string& init_checkpoint,
                    const agent::AgentConfig& config, const agent::ReplayOptions& replay_options,
                    const std::string& run_id) {
@@ -302,17 +346,9 @@ RunStart start_run(const std::vector<fs::path>& files, const std::string& init_c
                             "' does not exist: point it at a pretraining run's checkpoint "
                             "(runs/<run>/checkpoints/ckpt-*.bin)");
     }
-    const std::vector<std::uint8_t> bytes = read_file(init_checkpoint);
-    std::vector<std::uint8_t> agent_bytes;
-    try {
-      unpack_checkpoint(bytes, agent_bytes);
-    } catch (const CheckpointError&) {
-      agent_bytes = bytes;  // a bare agent checkpoint
-    }
     start.from = StartedFrom::kInitCheckpoint;
-    start.restored.file = init_checkpoint;
-    start.restored.agent = std::make_unique<agent::Agent>(config);
-    start.restored.agent->load_checkpoint(agent_bytes, init_checkpoint);
+    start.restored = load_agent_checkpoint(init_checkpoint, config);
+    start.restored.counters = {};  // a finetune counts its own steps from zero
     INDRIVE_LOG(kInfo, "learner") << "initialised from " << init_checkpoint;
   }
   ++start.restored.counters.learner_epoch;

@@ -225,5 +225,61 @@ TEST_F(LearnerResumeTest, WithEveryCheckpointDamagedTheLearnerRefusesToStartAndS
   std::printf("[figures] every checkpoint damaged: %s\n", message.c_str());
 }
 
+// An evaluation and a finetune read the agent alone, from a learner checkpoint (with its
+// counters) or a bare agent checkpoint (zero counters); a damaged learner checkpoint is named
+// as such, not misread as a bare agent checkpoint.
+TEST_F(LearnerResumeTest, AnAgentLoadsFromALearnerOrABareAgentCheckpoint) {
+  const fs::path learner_file = write_checkpoint(2);
+  const RestoredRun from_learner = load_agent_checkpoint(learner_file, service_->agent());
+  ASSERT_NE(from_learner.agent, nullptr);
+  EXPECT_EQ(from_learner.counters.updates, 20);
+  EXPECT_EQ(from_learner.agent->checkpoint_bytes(), agent_bytes_);
+  EXPECT_FALSE(from_learner.replay.has_value());
+
+  const fs::path bare = dir_.path() / "agent.ckpt";
+  write(bare, agent_bytes_);
+  const RestoredRun from_bare = load_agent_checkpoint(bare, service_->agent());
+  EXPECT_EQ(from_bare.counters.updates, 0);
+  EXPECT_EQ(from_bare.agent->checkpoint_bytes(), agent_bytes_);
+
+  fs::resize_file(learner_file, fs::file_size(learner_file) - 3);
+  try {
+    load_agent_checkpoint(learner_file, service_->agent());
+    FAIL() << "a truncated learner checkpoint loaded";
+  } catch (const CheckpointError& error) {
+    EXPECT_NE(std::string(error.what()).find(learner_file.string() + ": learner checkpoint"),
+              std::string::npos)
+        << error.what();
+  }
+  EXPECT_THROW(load_agent_checkpoint(dir_.path() / "missing.bin", service_->agent()),
+               CheckpointError);
+}
+
+// The newest agent that loads is taken; damaged newer files are skipped and left in place (an
+// evaluation does not touch a run's rotation), and with none loading the error names each.
+TEST_F(LearnerResumeTest, TheNewestAgentThatLoadsIsTakenAndDamagedOnesStayInPlace) {
+  write_checkpoint(1);
+  const fs::path newest = write_checkpoint(2);
+  fs::resize_file(newest, fs::file_size(newest) / 2);
+  const std::vector<fs::path> files = CheckpointFiles(checkpoints(), 5).list();
+  const RestoredRun loaded = load_newest_agent(files, service_->agent());
+  EXPECT_EQ(loaded.counters.updates, 10);
+  EXPECT_EQ(loaded.skipped, 1u);
+  EXPECT_TRUE(fs::exists(newest));
+  EXPECT_NE(log().find("checkpoint " + newest.string() + " does not load and is skipped"),
+            std::string::npos)
+      << log();
+
+  fs::resize_file(files.front(), 10);
+  try {
+    load_newest_agent(files, service_->agent());
+    FAIL() << "an agent loaded although every checkpoint is damaged";
+  } catch (const CheckpointError& error) {
+    const std::string message = error.what();
+    EXPECT_NE(message.find("no checkpoint loads (2 tried)"), std::string::npos) << message;
+    EXPECT_NE(message.find(files.front().string() + ": "), std::string::npos) << message;
+  }
+}
+
 }  // namespace
 }  // namespace indrive::learner

@@ -68,37 +68,22 @@ agent::AgentConfig local_agent_config(const service::ServiceConfig& config,
   return agent;
 }
 
-// The agent bytes of a checkpoint file: a learner checkpoint (counters + agent) or a bare agent
-// checkpoint. Returns the counters (zero for a bare one).
-learner::LearnerCounters read_checkpoint(const fs::path& path,
-                                         std::vector<std::uint8_t>& agent_bytes,
-                                         std::vector<std::uint8_t>* replay_bytes = nullptr) {
-  const auto bytes = read_file(path);
-  try {
-    return learner::unpack_checkpoint(bytes, agent_bytes, replay_bytes);
-  } catch (const learner::CheckpointError&) {
-    agent_bytes = bytes;
-    return {};
-  }
-}
-
 // The environment, started on the first reset: a run that only reloads or reports never
 // starts SUMO (libsumo allows one simulation per process).
 class LazyEnvironment : public agent::Environment {
  public:
-  LazyEnvironment(const service::ServiceConfig& config, env::EnvConfig env_config,
+  LazyEnvironment(env::EnvConfig env_config, actor::EnvAdapterOptions options,
                   std::function<void(const env::StepResult&)> observer,
                   std::function<void(const EpisodeRecord&)> episode_observer)
-      : config_(config),
-        env_config_(std::move(env_config)),
+      : env_config_(std::move(env_config)),
+        options_(options),
         observer_(std::move(observer)),
         episode_observer_(std::move(episode_observer)) {}
 
   agent::EnvStep reset() override {
     if (!adapter_) {
       env_ = std::make_unique<env::Env>(env_config_);
-      adapter_ =
-          std::make_unique<actor::EnvAdapter>(*env_, actor::EnvAdapter::options_from(config_));
+      adapter_ = std::make_unique<actor::EnvAdapter>(*env_, options_);
       adapter_->on_result(observer_);
       adapter_->on_episode(episode_observer_);
     }
@@ -107,8 +92,8 @@ class LazyEnvironment : public agent::Environment {
   agent::EnvStep step(int action) override { return adapter_->step(action); }
 
  private:
-  const service::ServiceConfig& config_;
   const env::EnvConfig env_config_;
+  const actor::EnvAdapterOptions options_;
   std::function<void(const env::StepResult&)> observer_;
   std::function<void(const EpisodeRecord&)> episode_observer_;
   std::unique_ptr<env::Env> env_;
@@ -131,10 +116,10 @@ struct LocalRun::Impl {
         checkpoints(run.checkpoints(), settings.checkpoint_keep),
         env_config(actor::env_config(service)),
         town(env::load_town(env_config.town, env_config.town_options)),
-        coverage(town.net,
-                 {.segment_m = actor::EnvAdapter::options_from(service).coverage_segment_m}),
+        adapter_options(actor::EnvAdapter::options_from(service)),
+        coverage(town.net, {.segment_m = adapter_options.coverage_segment_m}),
         environment(
-            service, env_config,
+            env_config, adapter_options,
             [this](const env::StepResult& result) {
               if (result.is_first) close_episode();
               coverage.observe(result.ego.pose);
@@ -323,6 +308,7 @@ struct LocalRun::Impl {
   CheckpointFiles checkpoints;
   const env::EnvConfig env_config;
   env::Town town;  // for coverage; the Env loads its own copy when it starts
+  const actor::EnvAdapterOptions adapter_options;
   env::CoverageTracker coverage;
   EpisodeStats episodes;  // length and reach of the episodes the coverage tracker closed
   LazyEnvironment environment;
@@ -369,22 +355,22 @@ EvaluationSummary evaluate_locally(const service::ServiceConfig& config, const s
   if (local.random) {
     policy = actor::make_random_policy(static_cast<std::uint64_t>(settings.seed));
   } else {
-    const auto newest = CheckpointFiles(run.checkpoints(), 1000).newest();
-    if (!newest) {
+    const std::vector<fs::path> files = CheckpointFiles(run.checkpoints(), 1000).list();
+    if (files.empty()) {
       throw LocalRunError("no checkpoint in " + run.checkpoints().string() +
                           ": train the run first (indrive-train-local without "
                           "--evaluate-episodes), or pass --random for the random baseline");
     }
-    std::vector<std::uint8_t> agent_bytes;
-    version = read_checkpoint(*newest, agent_bytes).updates;
-    agent::Agent agent(agent_config);
-    agent.load_checkpoint(agent_bytes, newest->string());
+    // The newest that loads: a damaged newest one (a crash while writing it) is skipped.
+    const learner::RestoredRun loaded = learner::load_newest_agent(files, agent_config);
+    version = loaded.counters.updates;
+    const agent::Agent& agent = *loaded.agent;
+    const std::string name = loaded.file.string();
     const actor::PolicyHead head = agent_config.phase == agent::Phase::kPretrain
                                        ? actor::PolicyHead::kExploration
                                        : actor::PolicyHead::kTask;
-    policy = actor::make_snapshot_policy(agent_config, agent.snapshot(), head, newest->string());
-    INDRIVE_LOG(kInfo, "local") << "evaluating " << agent.acting_actor_group() << " of "
-                                << newest->string();
+    policy = actor::make_snapshot_policy(agent_config, agent.snapshot(), head, name);
+    INDRIVE_LOG(kInfo, "local") << "evaluating " << agent.acting_actor_group() << " of " << name;
   }
 
   actor::ProtocolGrid grid;

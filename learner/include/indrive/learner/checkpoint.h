@@ -48,6 +48,9 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes = nullptr);
 
+// True when `bytes` begin like a learner checkpoint (its magic prefix), whole or damaged.
+bool looks_like_learner_checkpoint(std::span<const std::uint8_t> bytes);
+
 // A run restored from one checkpoint file.
 struct RestoredRun {
   std::filesystem::path file;  // the checkpoint it came from
@@ -68,6 +71,20 @@ struct RestoredRun {
 RestoredRun restore_newest(const std::vector<std::filesystem::path>& files,
                            const agent::AgentConfig& config,
                            const agent::ReplayOptions& replay_options, const std::string& run_id);
+
+// The agent of one file that is either a learner checkpoint (its agent section and counters) or
+// a bare agent checkpoint (Agent::checkpoint_bytes; zero counters), as a finetune's starting
+// point and an evaluation read them, loaded into a fresh agent; no replay. Throws CheckpointError
+// when the file is missing or is a damaged learner checkpoint, agent::AgentError when its agent
+// does not load into `config`.
+RestoredRun load_agent_checkpoint(const std::filesystem::path& file,
+                                  const agent::AgentConfig& config);
+
+// load_agent_checkpoint of the newest of `files` (oldest first) that loads. The damaged ones
+// are skipped with a warning and left where they are (only a resuming run sets them aside);
+// `skipped` counts them. Throws CheckpointError listing each file's fault when none loads.
+RestoredRun load_newest_agent(const std::vector<std::filesystem::path>& files,
+                              const agent::AgentConfig& config);
 
 // Where a training run starts, for indrive-learner and indrive-train-local alike:
 //   - its newest intact checkpoint among `files` (restore_newest: counters, agent, replay);
