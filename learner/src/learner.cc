@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "indrive/agent/agent.h"
+#include "indrive/agent/rate_limiter.h"
 #include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/episode_csv.h"
@@ -21,7 +22,6 @@
 #include "indrive/learner/evaluation_tally.h"
 #include "indrive/learner/ingest.h"
 #include "indrive/learner/learner_config.h"
-#include "indrive/learner/rate_limiter.h"
 #include "indrive/learner/snapshot_publisher.h"
 #include "indrive/learner/training_episodes.h"
 #include "indrive/nn/kernels.h"
@@ -515,7 +515,7 @@ struct Learner::Impl {
   VersionReservation versions;  // policy versions reserved on disk before they are published
   std::unique_ptr<agent::Agent> agent;  // set by resume()
   agent::ReplayBuffer replay;
-  RateLimiter rate;
+  agent::RateLimiter rate;
   ChunkQueue chunks;  // chunks on their way into the replay
   MetricsLog metrics;
   EvaluationTally evaluations;                      // evaluators' results, on the metrics lines

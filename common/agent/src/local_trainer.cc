@@ -20,6 +20,9 @@ LocalTrainer::LocalTrainer(const AgentConfig& config, Environment& env, LocalTra
     : config_(config),
       env_(env),
       options_(options),
+      rate_({.replay_ratio = options.train_ratio,
+             .steps_per_update =
+                 static_cast<std::int64_t>(config.replay.batch) * config.replay.length}),
       agent_(config),
       replay_(replay_options(config)),
       policy_(config),
@@ -33,7 +36,6 @@ void LocalTrainer::run(std::int64_t env_steps,
                        const std::function<void(const TrainMetrics&)>& on_metrics,
                        const std::atomic<bool>* stop) {
   const bool keep_rewards = config_.phase != Phase::kPretrain;
-  const double per_update = static_cast<double>(config_.replay.batch) * config_.replay.length;
   const auto stopped = [stop] { return stop != nullptr && stop->load(); };
   for (std::int64_t i = 0; i < env_steps && !stopped(); ++i) {
     if (need_reset_) {
@@ -65,11 +67,10 @@ void LocalTrainer::run(std::int64_t env_steps,
       return_ += current_.reward;
       first_ = false;
     }
-    // Train while the replayed/env ratio is below the target.
+    // Train while updates are due at the replay ratio, over the whole run.
     while (!prefill && !stopped() && replay_.num_windows(config_.replay.length) > 0 &&
-           static_cast<double>(earlier_updates_ + counters_.updates + 1) * per_update <=
-               options_.train_ratio *
-                   static_cast<double>(earlier_env_steps_ + counters_.env_steps)) {
+           earlier_updates_ + counters_.updates <
+               rate_.updates_due(earlier_env_steps_ + counters_.env_steps)) {
       const TrainMetrics metrics =
           agent_.train_step(replay_.sample(config_.replay.batch, config_.replay.length));
       ++counters_.updates;

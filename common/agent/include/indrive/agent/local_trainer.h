@@ -19,6 +19,7 @@
 
 #include "indrive/agent/agent.h"
 #include "indrive/agent/policy.h"
+#include "indrive/agent/rate_limiter.h"
 #include "indrive/agent/replay.h"
 
 namespace indrive::agent {
@@ -92,6 +93,7 @@ class LocalTrainer {
   AgentConfig config_;
   Environment& env_;
   LocalTrainerOptions options_;
+  RateLimiter rate_;  // the replay ratio as the learner keeps it (the prefill is the replay's)
   std::int64_t earlier_env_steps_ = 0, earlier_updates_ = 0;  // continue_from()
   Agent agent_;
   ReplayBuffer replay_;

@@ -1,4 +1,4 @@
-#include "indrive/learner/rate_limiter.h"
+#include "indrive/agent/rate_limiter.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include "indrive/basics/check.h"
 
-namespace indrive::learner {
+namespace indrive::agent {
 
 RateLimiter::RateLimiter(RateOptions options) : options_(options) {
   INDRIVE_CHECK(options_.replay_ratio > 0.0 && options_.steps_per_update > 0 &&
@@ -31,4 +31,4 @@ std::uint64_t RateLimiter::allowance(std::int64_t updates, std::int64_t fill_flo
   return static_cast<std::uint64_t>(std::max(next_due, floor) + options_.slack);
 }
 
-}  // namespace indrive::learner
+}  // namespace indrive::agent

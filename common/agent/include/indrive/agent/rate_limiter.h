@@ -15,7 +15,7 @@
 
 #include <cstdint>
 
-namespace indrive::learner {
+namespace indrive::agent {
 
 struct RateOptions {
   double replay_ratio = 32.0;         // replayed steps per env step
@@ -43,4 +43,4 @@ class RateLimiter {
   RateOptions options_;
 };
 
-}  // namespace indrive::learner
+}  // namespace indrive::agent

@@ -1,11 +1,11 @@
-#include "indrive/learner/rate_limiter.h"
+#include "indrive/agent/rate_limiter.h"
 
 #include <gtest/gtest.h>
 
 #include <limits>
 #include <random>
 
-namespace indrive::learner {
+namespace indrive::agent {
 namespace {
 
 TEST(RateLimiterTest, UpdatesFallDueAtTheRatioAfterPrefill) {
@@ -64,4 +64,4 @@ TEST(RateLimiterTest, RatioHoldsWhateverTheSpeedsOfActorsAndLearner) {
 }
 
 }  // namespace
-}  // namespace indrive::learner
+}  // namespace indrive::agent
