@@ -217,8 +217,14 @@ StepResult Env::step(int action) {
   if (result.is_last) {
     running_ = false;
     if (is_failure(result.events)) {
+      // Where, so that a failure of a scripted policy on a user's map can be looked up.
+      const RoadStatus& road = events_->road();
       INDRIVE_LOG(kInfo, "env") << "episode failed at step " << step_ << ": "
-                                << event_names(result.events);
+                                << event_names(result.events) << " at (" << ego_.pose.x_m << ", "
+                                << ego_.pose.y_m << ") m on lane "
+                                << (road.lane >= 0 ? town_->net.lane(road.lane).id : "none")
+                                << (road.in_junction ? " (in a junction)" : "") << ", "
+                                << progress.distance_to_route_m << " m from the route";
     }
   }
   return result;

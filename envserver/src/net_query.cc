@@ -224,6 +224,9 @@ std::vector<LanePosition> RoadNetwork::lanes_at(const Eigen::Vector2d& point,
 }
 
 namespace {
+// A lane more than this off the vehicle's heading crosses its path rather than carries it.
+constexpr double kCrossingRad = M_PI / 3.0;
+
 double fit_score(const Lane& lane, const LanePosition& at) {
   return std::abs(at.lateral_m) / lane.width_m + (lane.internal ? kInternalBias : 0.0);
 }
@@ -247,9 +250,13 @@ std::optional<LanePosition> RoadNetwork::locate(const Eigen::Vector2d& point,
   std::optional<LanePosition> best;
   double best_score = std::numeric_limits<double>::infinity();
   for (const LanePosition& at : lanes_at(point)) {
-    // Lanes against the vehicle's direction only win when nothing else is there.
-    const bool against = std::abs(wrap_angle(yaw_rad - at.heading_rad)) > 0.5 * M_PI;
-    const double score = fit_score(lanes_[at.lane], at) + (against ? 10.0 : 0.0);
+    // Lanes against the vehicle's direction only win when nothing else is there, and lanes
+    // that cross its direction (more than 60 degrees off) only over those: where two roads
+    // cross without a junction (a bridge over a road, as on CARLA's Town04, converted flat),
+    // the road under the vehicle is the one it drives along, however near the other's centre.
+    const double off = std::abs(wrap_angle(yaw_rad - at.heading_rad));
+    const double tier = off > 0.5 * M_PI ? 10.0 : off > kCrossingRad ? 5.0 : 0.0;
+    const double score = fit_score(lanes_[at.lane], at) + tier;
     if (score < best_score) {
       best_score = score;
       best = at;

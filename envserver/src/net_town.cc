@@ -404,7 +404,7 @@ namespace {
 std::vector<RouteSpec> checked_derived_routes(const RoadNetwork& net, const fs::path& net_file,
                                               const TownOptions& options,
                                               std::vector<std::string>& dropped) {
-  constexpr const char* kRoutesVersion = "routes-v1";
+  constexpr const char* kRoutesVersion = "routes-v2";  // v2: crossing lanes rank below aligned ones
   const std::string bytes = read_file(net_file);
   std::uint32_t hash =
       indrive::crc32(kRoutesVersion, std::char_traits<char>::length(kRoutesVersion));

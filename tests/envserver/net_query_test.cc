@@ -75,6 +75,24 @@ TEST_F(NetQueryTest, HeadingPicksTheLaneOnTheCentreLine) {
   EXPECT_EQ(net_.locate({30.0, -1.75}, M_PI)->lane, lane("ab_0"));
 }
 
+// Two roads that cross without a junction (a bridge converted flat, as on CARLA's Town04): a
+// vehicle driving north along one is located on it, although the other's centre line is nearer
+// and its direction (89.4 degrees off) is still within 90 degrees of the vehicle's.
+TEST(NetQueryCrossingTest, WhereRoadsCrossWithoutAJunctionTheRoadDrivenAlongWins) {
+  const RoadNetwork net = RoadNetwork::parse(R"(<net version="1.9">
+  <edge id="we" from="w" to="e"><lane id="we_0" index="0" width="3.5" shape="-50,-0.5 50,0.5"/></edge>
+  <edge id="sn" from="s" to="n"><lane id="sn_0" index="0" width="3.5" shape="0,-50 0,50"/></edge>
+</net>)",
+                                             "crossing");
+  const Eigen::Vector2d point(0.05, 0.0005);  // on we_0's centre line, 5 cm east of sn_0's
+  ASSERT_EQ(net.lanes_at(point).size(), 2u);
+  EXPECT_EQ(net.locate(point)->lane, net.find_lane("we_0")) << "without a heading: the nearer";
+  EXPECT_EQ(net.locate(point, 0.5 * M_PI)->lane, net.find_lane("sn_0"));
+  EXPECT_EQ(net.locate(point, 0.0)->lane, net.find_lane("we_0"));
+  // A vehicle across both (45 degrees to each): the better fit, as before.
+  EXPECT_EQ(net.locate(point, 0.25 * M_PI)->lane, net.find_lane("we_0"));
+}
+
 TEST_F(NetQueryTest, OffRoadPointsAndMargins) {
   EXPECT_FALSE(net_.locate({30.0, 5.0}).has_value());
   EXPECT_FALSE(net_.is_drivable({30.0, 5.0}));

@@ -147,8 +147,9 @@ class RoadNetwork {
   // Returns the lane containing the point that fits best: the smallest |lateral| relative to
   // the lane width, a normal lane winning ties over an internal one; nullopt when off all lanes.
   std::optional<LanePosition> locate(const Eigen::Vector2d& point) const;
-  // As locate(point), but prefers lanes whose direction lies within 90 degrees of `yaw_rad`, so
-  // that at junctions and on two-way roads the lane the vehicle drives on wins.
+  // As locate(point), but prefers lanes whose direction lies within 60 degrees of `yaw_rad`,
+  // then within 90, so that at junctions, on two-way roads and where two roads cross without
+  // a junction (a bridge) the lane the vehicle drives on wins.
   std::optional<LanePosition> locate(const Eigen::Vector2d& point, double yaw_rad) const;
   // True when the point lies inside any junction polygon.
   bool in_junction(const Eigen::Vector2d& point) const;
