@@ -120,6 +120,12 @@ RestoredRun restore(const fs::path& file, const agent::AgentConfig& config,
   return restored;
 }
 
+// True when `bytes` begin like a learner checkpoint (its magic prefix), whole or damaged.
+bool looks_like_learner_checkpoint(std::span<const std::uint8_t> bytes) {
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  return text.starts_with(kCheckpointMagicPrefix);
+}
+
 // Moves a damaged checkpoint out of the rotation, keeping its bytes for a look.
 void set_aside(const fs::path& file) {
   const fs::path target = file.string() + std::string(kDamagedSuffix);
@@ -287,11 +293,6 @@ RestoredRun restore_newest(const std::vector<fs::path>& files, const agent::Agen
                      : files.front().parent_path().string()) +
       " to start the run afresh.";
   throw CheckpointError(message);
-}
-
-bool looks_like_learner_checkpoint(std::span<const std::uint8_t> bytes) {
-  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
-  return text.starts_with(kCheckpointMagicPrefix);
 }
 
 RestoredRun load_agent_checkpoint(const fs::path& file, const agent::AgentConfig& config) {

@@ -48,9 +48,6 @@ LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes = nullptr);
 
-// True when `bytes` begin like a learner checkpoint (its magic prefix), whole or damaged.
-bool looks_like_learner_checkpoint(std::span<const std::uint8_t> bytes);
-
 // A run restored from one checkpoint file.
 struct RestoredRun {
   std::filesystem::path file;  // the checkpoint it came from
