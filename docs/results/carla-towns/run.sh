@@ -53,12 +53,15 @@ deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --see
 # replay ratio 512, then evaluated like the zero-shot), side by side, one core each; on
 # 2026-12-07, about 70 minutes of training each beside other work. Their `indrive_code`
 # evaluations were run later the same day by the chain command (stage fewshot, which skips what
-# is done): 25 minutes each on two cores.
-for t in lane_following collision_avoidance; do
-  deploy/experiments/paper_grid.sh grid --towns carla --out runs/carla-grid --seeds 0 --methods disag \
-    --stages "pretrain fewshot" --task "$t" --episodes 50 &
+# is done): 25 minutes each on two cores. Seed 1 the same way, later that day, side by side
+# beside other work: training and both protocols' evaluations took 43 (LF) and 40 (CA) minutes.
+for s in 0 1; do
+  for t in lane_following collision_avoidance; do
+    deploy/experiments/paper_grid.sh grid --towns carla --out runs/carla-grid --seeds "$s" --methods disag \
+      --stages "pretrain fewshot" --task "$t" --episodes 50 &
+  done
+  wait
 done
-wait
 # DreamerV3 from scratch on carla_town01's routes at the same total budget (110,000 task
 # steps), LF and CA side by side, one core each; on 2026-12-07 23-27 minutes of training
 # each, then both protocols' evaluations.
