@@ -53,9 +53,10 @@ deploy/experiments/paper_grid.sh chain --out runs/carla-grid --towns carla --see
 # replay ratio 512, then evaluated like the zero-shot), side by side, one core each; on
 # 2026-12-07, about 70 minutes of training each beside other work. Their `indrive_code`
 # evaluations were run later the same day by the chain command (stage fewshot, which skips what
-# is done): 25 minutes each on two cores. Seed 1 the same way, later that day, side by side
-# beside other work: training and both protocols' evaluations took 43 (LF) and 40 (CA) minutes.
-for s in 0 1; do
+# is done): 25 minutes each on two cores. Seeds 1 and 2 the same way, later that day, side by
+# side beside other work: training and both protocols' evaluations took 40-43 minutes (seed 1)
+# and 31-37 (seed 2).
+for s in 0 1 2; do
   for t in lane_following collision_avoidance; do
     deploy/experiments/paper_grid.sh grid --towns carla --out runs/carla-grid --seeds "$s" --methods disag \
       --stages "pretrain fewshot" --task "$t" --episodes 50 &
