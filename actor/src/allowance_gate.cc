@@ -14,10 +14,9 @@ void AllowanceGate::arrived() {
   news_arrived_.notify_all();
 }
 
-void AllowanceGate::on_allowance(const msg::StepAllowance& allowance) {
-  if (dds::validate(allowance, run_id_) != dds::DropReason::kOk) return;
+bool AllowanceGate::on_allowance(const msg::StepAllowance& allowance) {
+  if (dds::validate(allowance, run_id_) != dds::DropReason::kOk) return false;
   std::lock_guard<std::mutex> lock(mutex_);
-  last_heard_ = Clock::now();
   allowed_ = allowance.total_env_steps();
   have_allowance_ = true;
   if (allowance.learner_epoch() != epoch_) {
@@ -28,17 +27,18 @@ void AllowanceGate::on_allowance(const msg::StepAllowance& allowance) {
     epoch_ = allowance.learner_epoch();
   }
   arrived();
+  return true;
 }
 
-void AllowanceGate::on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::uint64_t own_steps) {
-  if (heartbeat.role() != msg::ROLE_LEARNER) return;
-  if (dds::validate(heartbeat, run_id_) != dds::DropReason::kOk) return;
+bool AllowanceGate::on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::uint64_t own_steps) {
+  if (heartbeat.role() != msg::ROLE_LEARNER) return false;
+  if (dds::validate(heartbeat, run_id_) != dds::DropReason::kOk) return false;
   std::lock_guard<std::mutex> lock(mutex_);
-  last_heard_ = Clock::now();
   received_ = heartbeat.env_steps();
   own_at_heartbeat_ = own_steps;
   have_received_ = true;
   arrived();
+  return true;
 }
 
 void AllowanceGate::wake() {
@@ -53,11 +53,6 @@ bool AllowanceGate::may_step(std::uint64_t own_steps) const {
   if (!have_allowance_ || !have_received_) return false;
   const std::uint64_t estimate = received_ + (own_steps - std::min(own_steps, own_at_heartbeat_));
   return estimate < allowed_;
-}
-
-double AllowanceGate::silent_s() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return std::chrono::duration<double>(Clock::now() - last_heard_).count();
 }
 
 std::uint64_t AllowanceGate::news() const {

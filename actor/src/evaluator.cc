@@ -16,10 +16,9 @@
 #include "indrive/actor/env_adapter.h"
 #include "indrive/actor/eval_protocol_episode.h"
 #include "indrive/actor/eval_protocol_record.h"
+#include "indrive/actor/learner_link.h"
 #include "indrive/actor/policies.h"
-#include "indrive/actor/rejoin.h"
 #include "indrive/actor/snapshot_file.h"
-#include "indrive/actor/snapshot_inbox.h"
 #include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/episode_csv.h"
@@ -142,11 +141,18 @@ struct Evaluator::Impl {
     task = head == PolicyHead::kExploration ? "exploration" : agent_config.task;
 
     if (source == PolicySource::kSnapshot && snapshot_file.empty()) {
-      inbox = std::make_unique<SnapshotInbox>(service.run_id(),
-                                              service::architecture_descriptor(agent_config),
-                                              actor_settings.request_after_s);
-      rejoin = RejoinSchedule(actor_settings.rejoin_after_s, actor_settings.rejoin_max_s);
-      connect();
+      // A participant that has heard the learner is never replaced: the evaluator's answer to a
+      // silent learner is eval.learner_silence_s (learner_link.h says why participants are).
+      link = std::make_unique<LearnerLink>(
+          service,
+          LearnerLinkOptions{.role = "evaluator",
+                             .requester_role = msg::ROLE_EVALUATOR,
+                             .id = static_cast<std::uint32_t>(index),
+                             .architecture = service::architecture_descriptor(agent_config),
+                             .request_after_s = actor_settings.request_after_s,
+                             .rejoin_after_s = actor_settings.rejoin_after_s,
+                             .rejoin_max_s = actor_settings.rejoin_max_s,
+                             .replace_silent_over_shm = false});
     }
     env::EnvConfig env_config = protocol_env_config(actor::env_config(service, agent_config),
                                                     parse_protocol(eval.protocol));
@@ -154,80 +160,16 @@ struct Evaluator::Impl {
     env = std::make_unique<env::Env>(env_config);
   }
 
-  // The readers' callbacks use the inbox and the counters: the endpoints go first.
-  ~Impl() { endpoints.reset(); }
-
-  // This evaluator's DDS participant with its readers and writers; the inbox and the counters
-  // they feed live outside them, so a new participant carries on where the old one stopped.
-  void connect() {
-    endpoints = std::make_unique<dds::EndpointSet>(config.participant_options("evaluator"));
-    result_writer = &endpoints->writer<msg::EpisodeResult>();
-    request_writer = &endpoints->writer<msg::SnapshotRequest>();
-    endpoints->reader<msg::PolicySnapshot>(
-        [this](const msg::PolicySnapshot& snapshot) { inbox->offer(snapshot); });
-    endpoints->reader<msg::SnapshotAnnounce>(
-        [this](const msg::SnapshotAnnounce& announce) { inbox->announce(announce); });
-    endpoints->reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
-      if (heartbeat.role() != msg::ROLE_LEARNER ||
-          dds::validate(heartbeat, config.run_id()) != dds::DropReason::kOk) {
-        return;
-      }
-      last_learner_beat.store(Clock::now().time_since_epoch().count());
-      if (heartbeat.state() == "done") learner_done.store(heartbeat.policy_version());
-    });
-    connected_at = Clock::now();
-  }
-
-  // Like a training actor's (training_actor.cc): a participant that has heard nothing of the
-  // learner (no heartbeat, which comes every 100 ms) for actor.rejoin_after_s since it was made is
-  // replaced by a new one. A DDS Security handshake between a new participant and the learner can
-  // stall for good (an evaluator joining late on another host waited 120 s for its first
-  // snapshot while every other participant had authenticated it); the new participant's
-  // handshake starts afresh. Nothing is lost: a participant that never heard the learner holds
-  // nothing for it. Each replacement that hears nothing either doubles the wait for the next,
-  // up to actor.rejoin_max_s (rejoin.h).
-  void maybe_rejoin() {
-    if (!rejoin.enabled()) return;
-    const Clock::time_point beat{Clock::duration(last_learner_beat.load())};
-    if (beat >= connected_at) {  // heard with this participant
-      rejoin.heard();
-      return;
-    }
-    const double wait_s = rejoin.wait_s();
-    if (std::chrono::duration<double>(Clock::now() - connected_at).count() < wait_s) return;
-    ++rejoins;
-    rejoin.replaced();
-    INDRIVE_LOG(kWarn, "evaluator")
-        << "evaluator " << index << " heard nothing of the learner of run '" << config.run_id()
-        << "' for " << wait_s << " s; recreating its DDS participant (rejoin " << rejoins
-        << "; the next after " << rejoin.wait_s() << " s of silence)";
-    result_writer = nullptr;
-    request_writer = nullptr;
-    endpoints.reset();
-    connect();
-  }
-
-  void request_snapshot() {
-    msg::SnapshotRequest request;
-    request.run_id(config.run_id());
-    request.requester_role(msg::ROLE_EVALUATOR);
-    request.requester_id(static_cast<std::uint32_t>(index));
-    dds::seal(request);
-    request_writer->write(request);
-  }
-
   // The version the learner declared its last, by its reliable final announce or its
   // heartbeat (0: not yet).
-  std::uint64_t final_version() const {
-    return std::max(learner_done.load(), inbox ? inbox->final_version() : 0);
-  }
+  std::uint64_t final_version() const { return link ? link->final_version() : 0; }
 
   // True when the learner has not been heard from for eval.learner_silence_s since `since` (the
   // later of the two counts): it died, or it ended without its final announce reaching us.
   bool learner_silent(Clock::time_point since) const {
     const double limit_s = eval.learner_silence_s;
     if (limit_s <= 0.0) return false;
-    const Clock::time_point beat{Clock::duration(last_learner_beat.load())};
+    const Clock::time_point beat = link->heard_at();
     return std::chrono::duration<double>(Clock::now() - std::max(since, beat)).count() > limit_s;
   }
 
@@ -309,7 +251,7 @@ struct Evaluator::Impl {
     const auto start = Clock::now();
     while (!stop.load() &&
            std::chrono::duration<double>(Clock::now() - start).count() < timeout_s) {
-      auto snapshot = inbox->take_newer_than(after);
+      auto snapshot = link->inbox().take_newer_than(after);
       const std::uint64_t last = final_version();
       if (snapshot != nullptr && (!wait_for_done || (last > 0 && snapshot->version() >= last))) {
         return snapshot;
@@ -323,10 +265,10 @@ struct Evaluator::Impl {
         warn_evaluating_unannounced(snapshot->version());
         return snapshot;
       }
-      if (inbox->should_request(snapshot ? snapshot->version() : after, Clock::now())) {
-        request_snapshot();
+      if (link->inbox().should_request(snapshot ? snapshot->version() : after, Clock::now())) {
+        link->request_snapshot();
       }
-      maybe_rejoin();
+      link->maybe_rejoin();
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     return nullptr;
@@ -430,7 +372,7 @@ struct Evaluator::Impl {
   }
 
   void publish(const EpisodeRecord& record, std::uint64_t version) {
-    if (!result_writer) return;
+    if (!link) return;
     msg::EpisodeResult result;
     dds::set_episode_fields(result, record);
     result.run_id(config.run_id());
@@ -439,7 +381,7 @@ struct Evaluator::Impl {
     result.sender_id(static_cast<std::uint32_t>(index));
     result.phase(msg::PHASE_EVALUATION);
     dds::seal(result);
-    result_writer->write(result);
+    link->results().write(result);
   }
 
   int run(const std::atomic<bool>& stop) {
@@ -471,7 +413,7 @@ struct Evaluator::Impl {
     }
     EpisodeCsvWriter csv(results_file());  // first: it cuts a row a crash left unfinished
     run_episodes(stop, version, 0, &csv, nullptr, finished_episodes(version));
-    if (result_writer) result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
+    if (link) link->results().wait_for_acknowledgments(std::chrono::seconds(2));
     return 0;
   }
 
@@ -489,7 +431,7 @@ struct Evaluator::Impl {
       std::shared_ptr<const msg::PolicySnapshot> next;
       const auto start = Clock::now();
       while (!stop.load() && next == nullptr) {
-        auto newest = inbox->take_newer_than(evaluated);
+        auto newest = link->inbox().take_newer_than(evaluated);
         const std::uint64_t done_version = final_version();
         if (newest != nullptr && (evaluated == 0 || newest->version() >= evaluated + every_k ||
                                   (done_version > 0 && newest->version() >= done_version))) {
@@ -516,8 +458,8 @@ struct Evaluator::Impl {
           }
           break;
         }
-        if (inbox->should_request(newest ? newest->version() : evaluated, Clock::now())) {
-          request_snapshot();
+        if (link->inbox().should_request(newest ? newest->version() : evaluated, Clock::now())) {
+          link->request_snapshot();
         }
         if (std::chrono::duration<double>(Clock::now() - start).count() > timeout_s) {
           INDRIVE_LOG(kError, "evaluator")
@@ -536,7 +478,7 @@ struct Evaluator::Impl {
       ++evaluations;
       if (final_from_file) break;  // the learner has ended: nothing newer will come
     }
-    if (result_writer) result_writer->wait_for_acknowledgments(std::chrono::seconds(2));
+    if (link) link->results().wait_for_acknowledgments(std::chrono::seconds(2));
     return 0;
   }
 
@@ -558,23 +500,13 @@ struct Evaluator::Impl {
   std::string method;
   std::string task;
   std::unique_ptr<EpisodePolicy> policy;
-  std::unique_ptr<SnapshotInbox> inbox;
-  std::atomic<std::uint64_t> learner_done{0};
-  // When the learner's last heartbeat arrived (steady clock ticks; 0: never).
-  std::atomic<Clock::rep> last_learner_beat{0};
-  Clock::time_point connected_at{};
   // The modification time of the final snapshot file last read (it is read again only when it
   // changes).
   std::filesystem::file_time_type final_file_seen{};
-  // From actor.rejoin_after_s and rejoin_max_s when a learner's snapshots are evaluated;
-  // never replaces a participant otherwise.
-  RejoinSchedule rejoin{0.0, 0.0};
-  std::uint64_t rejoins = 0;  // participants replaced (maybe_rejoin)
-  // The DDS endpoints when a learner's snapshot is evaluated; the writers belong to it.
-  std::unique_ptr<dds::EndpointSet> endpoints;
-  dds::Writer<msg::EpisodeResult>* result_writer = nullptr;
-  dds::Writer<msg::SnapshotRequest>* request_writer = nullptr;
   std::unique_ptr<env::Env> env;
+  // The link to the learner when a learner's snapshots are evaluated (nullptr otherwise). Last:
+  // its readers' callbacks go before anything else does.
+  std::unique_ptr<LearnerLink> link;
 };
 
 Evaluator::Evaluator(const service::ServiceConfig& config, int index, int count)

@@ -10,8 +10,7 @@
 #include "indrive/actor/chunk_builder.h"
 #include "indrive/actor/env_adapter.h"
 #include "indrive/actor/eval_protocol_record.h"
-#include "indrive/actor/rejoin.h"
-#include "indrive/actor/snapshot_inbox.h"
+#include "indrive/actor/learner_link.h"
 #include "indrive/agent/policy.h"
 #include "indrive/basics/check.h"
 #include "indrive/basics/log.h"
@@ -42,8 +41,6 @@ struct TrainingActor::Impl {
         chunk_length(settings.chunk_length),
         heartbeat_period_s(settings.heartbeat_s),
         with_rewards(agent_config.phase != agent::Phase::kPretrain),
-        inbox(service.run_id(), service::architecture_descriptor(agent_config),
-              settings.request_after_s),
         gate(service.run_id()),
         builder({.run_id = service.run_id(),
                  .actor_id = actor_id,
@@ -54,8 +51,7 @@ struct TrainingActor::Impl {
                  .with_rewards = with_rewards}),
         policy(agent_config),
         random_policy(agent_config.seed * 1000003u + actor_id),
-        rng(agent_config.seed * 7919u + actor_id + 1),
-        rejoin(settings.rejoin_after_s, settings.rejoin_max_s) {
+        rng(agent_config.seed * 7919u + actor_id + 1) {
     // DDS first: a learner can see this actor while SUMO is still loading.
     connect();
     heartbeat("starting");
@@ -74,67 +70,45 @@ struct TrainingActor::Impl {
                                 << service::architecture_descriptor(agent_config) << "'";
   }
 
-  ~Impl() { disconnect(); }
+  // The link's readers call into the gate and the counters: it goes first.
+  ~Impl() { link.reset(); }
 
-  // This actor's DDS participant with its readers and writers. The state they feed (snapshot
-  // inbox, allowance gate) lives outside them, so a new participant carries on where the old one
-  // stopped.
+  // This actor's link to the learner: its snapshots and requests, episode results and the
+  // participant's replacement (learner_link.h); the actor adds its chunks, heartbeats and the
+  // learner's allowances. The state they feed (snapshot inbox, allowance gate) lives outside the
+  // participant, so a new one carries on where the old one stopped.
   void connect() {
-    endpoints = std::make_unique<dds::EndpointSet>(config.participant_options("actor"));
-    chunk_writer = &endpoints->writer<msg::TrajectoryChunk>();
-    result_writer = &endpoints->writer<msg::EpisodeResult>();
-    heartbeat_writer = &endpoints->writer<msg::Heartbeat>();
-    request_writer = &endpoints->writer<msg::SnapshotRequest>();
-    endpoints->reader<msg::PolicySnapshot>([this](const msg::PolicySnapshot& snapshot) {
-      inbox.offer(snapshot);
-      gate.wake();
-    });
-    endpoints->reader<msg::SnapshotAnnounce>([this](const msg::SnapshotAnnounce& announce) {
-      inbox.announce(announce);
-      gate.wake();
-    });
-    endpoints->reader<msg::StepAllowance>(
-        [this](const msg::StepAllowance& allowance) { gate.on_allowance(allowance); });
-    endpoints->reader<msg::Heartbeat>([this](const msg::Heartbeat& heartbeat) {
-      gate.on_learner_heartbeat(heartbeat, own_steps.load());
-    });
-    connected_at = Clock::now();
+    link = std::make_unique<LearnerLink>(
+        config,
+        LearnerLinkOptions{.role = "actor",
+                           .requester_role = msg::ROLE_ACTOR,
+                           .id = id,
+                           .architecture = service::architecture_descriptor(agent_config),
+                           .request_after_s = settings.request_after_s,
+                           .rejoin_after_s = settings.rejoin_after_s,
+                           .rejoin_max_s = settings.rejoin_max_s,
+                           .replace_silent_over_shm = true},
+        LearnerLinkHooks{.add_endpoints =
+                             [this](dds::EndpointSet& set, LearnerLink& self) {
+                               chunk_writer = &set.writer<msg::TrajectoryChunk>();
+                               heartbeat_writer = &set.writer<msg::Heartbeat>();
+                               set.reader<msg::StepAllowance>(
+                                   [this, &self](const msg::StepAllowance& a) {
+                                     if (gate.on_allowance(a)) self.heard();
+                                   });
+                             },
+                         .on_snapshot_news = [this] { gate.wake(); },
+                         .on_heartbeat =
+                             [this](const msg::Heartbeat& heartbeat) {
+                               gate.on_learner_heartbeat(heartbeat, own_steps.load());
+                             }});
   }
 
-  // The endpoints go with their participant, in the set's order.
-  void disconnect() { endpoints.reset(); }
-
-  // A participant that has heard nothing of the learner for actor.rejoin_after_s is replaced by
-  // a new one, which opens its transport ports again and is discovered afresh. Why: on one host a
-  // process killed with SIGKILL leaves shared-memory ports behind that Fast DDS resets in every
-  // process that touches them, and once (in CI, under load) an actor restarted after such a kill
-  // never heard the learner within 60 s; the cause was not reproduced in about 50 local runs. And
-  // with DDS Security, a new participant's handshake with the learner can stall for good (in
-  // about 55 runs of the two-host security test, once for actor 1, over UDP on the learner's
-  // host: it heard nothing for 150 s while actor 0 trained; once for a late evaluator). A learner
-  // that is merely gone is found again the same way when it returns. Called only where this actor
-  // waits for the learner. Over UDP only a participant that has never heard the learner does it:
-  // once heard, silence means a cut link across hosts, where replacing it hurts: the chunks the old
-  // participant still held for the learner were lost (tests/system/two_host_test.cc); a
-  // participant that never heard the learner holds none (no allowance, no chunk).
-  // Each replacement that hears nothing either doubles the wait for the next, up to
-  // actor.rejoin_max_s (rejoin.h).
+  // Called only where this actor waits for the learner (learner_link.h says when it replaces
+  // the participant); a new participant says at once who this actor is.
   void maybe_rejoin() {
-    if (!rejoin.enabled()) return;
-    const double silent_s = gate.silent_s(), connected_s = seconds_since(connected_at);
-    const bool never_heard = silent_s >= connected_s;  // nothing since this participant was made
-    if (!never_heard) rejoin.heard();
-    const double wait_s = rejoin.wait_s();
-    if (silent_s < wait_s || connected_s < wait_s) return;
-    if (!endpoints->participant().uses_shared_memory() && !never_heard) return;
-    ++stats.rejoins;
-    if (never_heard) rejoin.replaced();
-    INDRIVE_LOG(kWarn, "actor") << "actor " << id << " heard nothing of the learner of run '"
-                                << config.run_id() << "' for " << wait_s
-                                << " s; recreating its DDS participant (rejoin " << stats.rejoins
-                                << "; the next after " << rejoin.wait_s() << " s of silence)";
-    disconnect();
-    connect();
+    if (!link->maybe_rejoin()) return;
+    stats.rejoins = link->rejoins();
     heartbeat("waiting");
   }
 
@@ -146,7 +120,7 @@ struct TrainingActor::Impl {
     beat.state(state);
     beat.policy_version(stats.policy_version);
     beat.env_steps(stats.env_steps);
-    beat.dropped_messages(inbox.drops().dropped() + inbox.architecture_rejects());
+    beat.dropped_messages(link->inbox().drops().dropped() + link->inbox().architecture_rejects());
     beat.wall_time_s(unix_time_s());
     dds::seal(beat);
     heartbeat_writer->write(beat);
@@ -173,7 +147,7 @@ struct TrainingActor::Impl {
   // Loads a newer snapshot if one arrived; the open chunk is sent first so that every chunk
   // is made by one policy version.
   void maybe_swap(const std::atomic<bool>& stop) {
-    auto snapshot = inbox.take_newer_than(stats.policy_version);
+    auto snapshot = link->inbox().take_newer_than(stats.policy_version);
     if (snapshot == nullptr) return;
     if (!builder.empty() && builder.policy_version() != snapshot->version()) {
       publish(builder.take(), stop);
@@ -200,16 +174,10 @@ struct TrainingActor::Impl {
   }
 
   void maybe_request() {
-    if (!inbox.should_request(stats.policy_version, Clock::now())) return;
-    msg::SnapshotRequest request;
-    request.run_id(config.run_id());
-    request.version(0);
-    request.requester_role(msg::ROLE_ACTOR);
-    request.requester_id(id);
-    dds::seal(request);
-    request_writer->write(request);
+    if (!link->inbox().should_request(stats.policy_version, Clock::now())) return;
+    link->request_snapshot();
     ++stats.snapshot_requests;
-    INDRIVE_LOG(kInfo, "actor") << "announced snapshot v" << inbox.announced_version()
+    INDRIVE_LOG(kInfo, "actor") << "announced snapshot v" << link->inbox().announced_version()
                                 << " not received; requested it again";
   }
 
@@ -266,7 +234,7 @@ struct TrainingActor::Impl {
     result.phase(config.wire_phase());
     result.reach_segments(static_cast<std::uint32_t>(reach));
     dds::seal(result);
-    result_writer->write(result);
+    link->results().write(result);
   }
 
   void run(const std::atomic<bool>& stop) {
@@ -366,18 +334,15 @@ struct TrainingActor::Impl {
   int chunk_length;
   double heartbeat_period_s;
   bool with_rewards;
-  SnapshotInbox inbox;
   AllowanceGate gate;
   ChunkBuilder builder;
   agent::Policy policy;
   agent::RandomPolicy random_policy;
   std::mt19937_64 rng;
-  // The DDS endpoints; the writers below belong to it (valid while it is connected).
-  std::unique_ptr<dds::EndpointSet> endpoints;
+  // The link to the learner; the writers below belong to its current participant.
+  std::unique_ptr<LearnerLink> link;
   dds::Writer<msg::TrajectoryChunk>* chunk_writer = nullptr;
-  dds::Writer<msg::EpisodeResult>* result_writer = nullptr;
   dds::Writer<msg::Heartbeat>* heartbeat_writer = nullptr;
-  dds::Writer<msg::SnapshotRequest>* request_writer = nullptr;
   std::unique_ptr<env::Env> env;
   std::unique_ptr<env::CoverageTracker> coverage;
   double coverage_period_s = 60.0;
@@ -394,8 +359,6 @@ struct TrainingActor::Impl {
   bool restart_state = false;
   std::atomic<std::uint64_t> own_steps{0};
   Clock::time_point last_heartbeat{};
-  RejoinSchedule rejoin;
-  Clock::time_point connected_at{};
   ActorStats stats;
 };
 

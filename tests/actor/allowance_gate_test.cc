@@ -109,13 +109,18 @@ TEST(AllowanceGateTest, ASnapshotsWakeEndsTheWaitWithoutPacing) {
   inbox.join();
 }
 
-TEST(AllowanceGateTest, HearingTheLearnerResetsTheSilence) {
+// The actor counts an accepted message as word of the learner (learner_link.h): only the
+// learner's own, of this run, are accepted.
+TEST(AllowanceGateTest, SaysWhichMessagesItAccepted) {
   AllowanceGate gate("run-a");
-  std::this_thread::sleep_for(milliseconds(30));
-  const double before = gate.silent_s();
-  EXPECT_GE(before, 0.03);
-  gate.on_learner_heartbeat(learner_heartbeat(0), 0);
-  EXPECT_LT(gate.silent_s(), before);
+  EXPECT_TRUE(gate.on_allowance(allowance(100)));
+  EXPECT_FALSE(gate.on_allowance(allowance(100, "run-b")));
+  EXPECT_TRUE(gate.on_learner_heartbeat(learner_heartbeat(0), 0));
+  EXPECT_FALSE(gate.on_learner_heartbeat(learner_heartbeat(0, "run-b"), 0));
+  EXPECT_FALSE(gate.on_learner_heartbeat(learner_heartbeat(0, "run-a", msg::ROLE_ACTOR), 0));
+  msg::StepAllowance other_schema = allowance(100);
+  other_schema.schema_version(other_schema.schema_version() + 1);
+  EXPECT_FALSE(gate.on_allowance(other_schema));
 }
 
 }  // namespace

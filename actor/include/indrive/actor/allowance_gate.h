@@ -34,22 +34,18 @@ class AllowanceGate {
 
   explicit AllowanceGate(std::string run_id);
 
-  // A StepAllowance; ignored unless it is valid and of this run. Logs a learner restart (a new
-  // learner epoch after the first).
-  void on_allowance(const msg::StepAllowance& allowance);
-  // A heartbeat; only the learner's of this run count. `own_steps` is the steps this actor has
-  // taken when it arrives.
-  void on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::uint64_t own_steps);
+  // A StepAllowance; ignored unless it is valid and of this run (false). Logs a learner restart
+  // (a new learner epoch after the first).
+  bool on_allowance(const msg::StepAllowance& allowance);
+  // A heartbeat; only the learner's of this run count (true). `own_steps` is the steps this
+  // actor has taken when it arrives.
+  bool on_learner_heartbeat(const msg::Heartbeat& heartbeat, std::uint64_t own_steps);
   // Something else a waiting actor acts on arrived (a snapshot or its announcement).
   void wake();
 
   // True when one more step of this actor stays within the allowance; false until both an
   // allowance and a learner heartbeat have arrived.
   bool may_step(std::uint64_t own_steps) const;
-  // Seconds since the last allowance or learner heartbeat of this run (since construction when
-  // none came yet).
-  double silent_s() const;
-
   // How many accepted allowances, learner heartbeats and wake() calls have arrived so far.
   std::uint64_t news() const;
   // Blocks until news() exceeds `seen` (true) or `timeout` has gone by (false). Read `seen`
@@ -69,7 +65,6 @@ class AllowanceGate {
   std::uint64_t received_ = 0;
   std::uint64_t own_at_heartbeat_ = 0;
   std::uint64_t news_ = 0;
-  Clock::time_point last_heard_ = Clock::now();
 };
 
 }  // namespace indrive::actor
