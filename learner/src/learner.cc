@@ -22,6 +22,7 @@
 #include "indrive/learner/evaluation_tally.h"
 #include "indrive/learner/ingest.h"
 #include "indrive/learner/learner_config.h"
+#include "indrive/learner/pacing.h"
 #include "indrive/learner/snapshot_publisher.h"
 #include "indrive/learner/training_episodes.h"
 #include "indrive/nn/kernels.h"
@@ -34,10 +35,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 // Policy versions reserved before they are published (VersionReservation).
 constexpr std::string_view kVersionReserveFile = "policy_versions_reserved";
-
-double unix_time_s() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
 
 }  // namespace
 
@@ -85,8 +82,7 @@ struct Learner::Impl {
 
     endpoints = std::make_unique<dds::EndpointSet>(service.participant_options("learner"));
     publisher.emplace(*endpoints, config.run_id(), settings.snapshot_hold_s);
-    allowance_writer = &endpoints->writer<msg::StepAllowance>();
-    heartbeat_writer = &endpoints->writer<msg::Heartbeat>();
+    pacer.emplace(*endpoints, config.run_id());
     endpoints->reader<msg::TrajectoryChunk>(
         [this](const msg::TrajectoryChunk& chunk) { chunks.offer(chunk); });
     endpoints->reader<msg::EpisodeResult>(
@@ -104,10 +100,11 @@ struct Learner::Impl {
   }
 
   // The readers' callbacks use the queues and counters: the endpoints go first, then the
-  // publisher that wrote on them.
+  // publisher and the pacer that wrote on them.
   ~Impl() {
     endpoints.reset();
     publisher.reset();
+    pacer.reset();
   }
 
   static agent::ReplayOptions replay_options(const agent::AgentConfig& agent_config) {
@@ -225,66 +222,8 @@ struct Learner::Impl {
       INDRIVE_LOG(kError, "learner") << "update failed and was skipped: " << error.what();
     }
     ++stats.counters.updates;
-    // The loop publishes it right after this update (publish_due_snapshot).
-    if (stats.counters.updates % settings.snapshot_every == 0) snapshot_due = true;
-  }
-
-  // Writes the due snapshot once the last one has reached every reader (or waited
-  // learner.snapshot_hold_s); until then training goes on and the snapshot stays due, so a slow
-  // reader gets fewer snapshots, each of them whole, and the parameters are taken when it goes.
-  void publish_due_snapshot() {
-    if (!snapshot_due) return;
-    if (!publisher->ready()) {
-      if (!snapshot_held) {
-        snapshot_held = true;
-        ++stats.snapshots_held;
-        if (seconds_since(last_hold_warning) >= 60.0) {
-          last_hold_warning = std::chrono::steady_clock::now();
-          INDRIVE_LOG(kInfo, "learner")
-              << "snapshot due at " << stats.counters.updates << " updates waits: a reader has "
-              << "not yet acknowledged v" << stats.counters.policy_version << " ("
-              << publisher->newest()->params().size() / 1e6
-              << " MB), so a new one would start it over; it goes when every reader has it, "
-                 "or after learner.snapshot_hold_s (logged at most once a minute)";
-        }
-      }
-      return;
-    }
-    if (snapshot_held && !publisher->delivered()) {
-      ++stats.snapshot_holds_expired;
-      INDRIVE_LOG(kWarn, "learner")
-          << "v" << stats.counters.policy_version << " was not acknowledged by every reader "
-          << "within learner.snapshot_hold_s = " << settings.snapshot_hold_s
-          << " s; publishing the next anyway "
-          << "(a reader has gone, or its link carries less than one snapshot per "
-          << settings.snapshot_hold_s << " s)";
-    }
-    snapshot_held = false;
-    snapshot_due = false;
-    publish_snapshot();
-  }
-
-  // The run's final policy as <run>/final-snapshot.params, so it can be evaluated without the
-  // learner: by `indrive-actor --evaluate --snapshot FILE`, and by an evaluator on this host that
-  // waited for the final snapshot but received none over DDS (one restarted after the learner
-  // ended, or one deaf to it; evaluator.cc). Written before the final announce.
-  void write_final_snapshot() {
-    const auto& newest = publisher->newest();
-    if (!newest) return;
-    const std::filesystem::path path = final_snapshot_path(run.path());
-    try {
-      agent::write_snapshot_file(path, newest->params(), agent_config,
-                                 agent::SnapshotProvenance{.run_id = config.run_id(),
-                                                           .version = newest->version(),
-                                                           .env_steps = newest->env_steps()});
-      INDRIVE_LOG(kInfo, "learner")
-          << "final snapshot v" << newest->version() << " written to " << path.string();
-    } catch (const std::exception& error) {
-      INDRIVE_LOG(kError, "learner")
-          << "the final snapshot v" << newest->version() << " could not be written to "
-          << path.string() << " (" << error.what()
-          << "); evaluators still receive it over DDS while the learner runs";
-    }
+    // The loop publishes it right after this update, or once the last reached every reader.
+    if (stats.counters.updates % settings.snapshot_every == 0) publisher->mark_due();
   }
 
   void publish_snapshot() {
@@ -313,40 +252,17 @@ struct Learner::Impl {
     return allowed;
   }
 
-  // Publishes the allowance when it changed and the learner's heartbeat (which tells actors
-  // how many steps arrived) at least every 100 ms.
+  // The allowance and the heartbeat (Pacer says when they go out).
   void publish_pacing(bool force) {
-    const std::uint64_t allowed = allowance();
-    const bool changed =
-        allowed != published_allowance || stats.counters.env_steps != published_received;
-    if (!force && !(changed && seconds_since(last_pacing) > 0.005) &&
-        seconds_since(last_pacing) < 0.1) {
-      return;
-    }
-    msg::StepAllowance message;
-    message.run_id(config.run_id());
-    message.total_env_steps(allowed);
-    message.replay_ratio(rate.options().replay_ratio);
-    message.learner_epoch(stats.counters.learner_epoch);
-    message.policy_version(stats.counters.policy_version);
-    dds::seal(message);
-    allowance_writer->write(message);
-
-    msg::Heartbeat beat;
-    beat.role(msg::ROLE_LEARNER);
-    beat.id(0);
-    beat.run_id(config.run_id());
-    beat.state(done ? "done" : "running");
-    beat.policy_version(stats.counters.policy_version);
-    beat.env_steps(static_cast<std::uint64_t>(stats.counters.env_steps));
-    beat.updates(static_cast<std::uint64_t>(stats.counters.updates));
-    beat.dropped_messages(chunks.drops().dropped());
-    beat.wall_time_s(unix_time_s());
-    dds::seal(beat);
-    heartbeat_writer->write(beat);
-    published_allowance = allowed;
-    published_received = stats.counters.env_steps;
-    last_pacing = Clock::now();
+    pacer->publish({.allowed = allowance(),
+                    .env_steps = stats.counters.env_steps,
+                    .updates = stats.counters.updates,
+                    .policy_version = stats.counters.policy_version,
+                    .learner_epoch = stats.counters.learner_epoch,
+                    .replay_ratio = rate.options().replay_ratio,
+                    .dropped_chunks = chunks.drops().dropped(),
+                    .done = done},
+                   force);
   }
 
   service::TrainingProgress progress_now() const {
@@ -379,8 +295,8 @@ struct Learner::Impl {
                    {"replay_added", replay.total_added()},
                    {"snapshots_published", stats.snapshots_published},
                    {"snapshot_requests", stats.snapshot_requests},
-                   {"snapshots_held", stats.snapshots_held},
-                   {"snapshot_holds_expired", stats.snapshot_holds_expired},
+                   {"snapshots_held", publisher->holds()},
+                   {"snapshot_holds_expired", publisher->holds_expired()},
                    {"chunks", stats.chunks},
                    {"replay_actors", chunks.actors()},
                    {"dropped_chunks", drops.dropped()},
@@ -448,7 +364,7 @@ struct Learner::Impl {
       // and take them again, running ahead of the replay ratio on a slow or loaded machine.
       worked = drain() || worked;
       publish_pacing(false);
-      publish_due_snapshot();
+      if (publisher->take_due(stats.counters.updates)) publish_snapshot();
       if (publisher->serve_request(done)) ++stats.snapshot_requests;
       if (publisher->seconds_since_announce() >= settings.announce_s) publisher->announce(done);
       log_metrics();
@@ -470,14 +386,17 @@ struct Learner::Impl {
     // it, and the newest periodic snapshot is the run's final policy otherwise. The learner
     // lingers briefly so readers can fetch it.
     // A snapshot still held for a slow reader goes now too: it is the run's final policy.
-    if (done && stats.counters.updates > 0 && (!publisher->newest() || snapshot_due)) {
-      snapshot_due = false;
+    if (done && stats.counters.updates > 0 && (!publisher->newest() || publisher->due())) {
       publish_snapshot();
       INDRIVE_LOG(kInfo, "learner") << "final snapshot v" << stats.counters.policy_version << " at "
                                     << stats.counters.updates << " updates";
       std::this_thread::sleep_for(std::chrono::seconds(2));
     }
-    if (done) write_final_snapshot();
+    // The run's final policy as <run>/final-snapshot.params, so it can be evaluated without the
+    // learner: by `indrive-actor --evaluate --snapshot FILE`, and by an evaluator on this host
+    // that waited for the final snapshot but received none over DDS (one restarted after the
+    // learner ended, or one deaf to it; evaluator.cc). Written before the final announce.
+    if (done) publisher->write_final_file(final_snapshot_path(run.path()), agent_config);
     // A final checkpoint that cannot be written loses the run's work since the previous one:
     // the exit code says so (indrive launch restarts a learner that exits non-zero, which then
     // resumes from that previous checkpoint).
@@ -521,20 +440,15 @@ struct Learner::Impl {
   EvaluationTally evaluations;                      // evaluators' results, on the metrics lines
   std::optional<dds::SharedMemorySweeper> sweeper;  // of /dev/shm, when there is one
   Clock::time_point next_sweep{};
-  bool snapshot_due = false;   // snapshot_every updates passed since the last snapshot
-  bool snapshot_held = false;  // ... and it waits for a reader to acknowledge the last one
-  std::chrono::steady_clock::time_point last_hold_warning{};
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;
   fs::path latest_checkpoint;  // the newest intact checkpoint this learner wrote or resumed from
   bool done = false;
 
-  // DDS: the endpoint set owns every reader and writer; the publisher and the pacing writers
-  // below write on it.
+  // DDS: the endpoint set owns every reader and writer; the publisher and the pacer write on it.
   std::unique_ptr<dds::EndpointSet> endpoints;
   std::optional<SnapshotPublisher> publisher;
-  dds::Writer<msg::StepAllowance>* allowance_writer = nullptr;
-  dds::Writer<msg::Heartbeat>* heartbeat_writer = nullptr;
+  std::optional<Pacer> pacer;
 
   std::mutex results_mutex;
   std::uint64_t interval_episodes = 0, interval_successes = 0;  // under results_mutex
@@ -543,9 +457,7 @@ struct Learner::Impl {
   agent::TrainMetrics last_metrics;
   LearnerStats stats;
   std::function<void(const std::string&)> progress;
-  std::uint64_t published_allowance = 0;
-  std::int64_t published_received = -1;
-  Clock::time_point last_pacing{}, last_checkpoint{};
+  Clock::time_point last_checkpoint{};
   service::MetricsInterval interval;  // since the last metrics line
   double interval_lag_sum = 0.0;
   std::uint64_t interval_chunks = 0;

@@ -4,6 +4,7 @@
 #include <string>
 #include <utility>
 
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/log.h"
 #include "indrive/basics/run_dir.h"
 #include "indrive/learner/checkpoint.h"
@@ -49,6 +50,7 @@ SnapshotPublisher::SnapshotPublisher(dds::EndpointSet& endpoints, std::string ru
     : run_id_(std::move(run_id)),
       snapshot_writer_(endpoints.writer<msg::PolicySnapshot>()),
       announce_writer_(endpoints.writer<msg::SnapshotAnnounce>()),
+      hold_s_(hold_s),
       hold_(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
           std::chrono::duration<double>(hold_s))) {
   endpoints.reader<msg::SnapshotRequest>([this](const msg::SnapshotRequest& request) {
@@ -73,7 +75,59 @@ void SnapshotPublisher::publish(msg::PolicySnapshot snapshot, bool done) {
   snapshot_writer_.write(snapshot);
   last_write_ = std::chrono::steady_clock::now();
   newest_ = std::move(snapshot);
+  due_ = false;
+  held_ = false;
   announce(done);
+}
+
+bool SnapshotPublisher::take_due(std::int64_t updates) {
+  if (!due_) return false;
+  if (!ready()) {
+    if (!held_) {
+      held_ = true;
+      ++holds_;
+      if (std::chrono::steady_clock::now() - last_hold_log_ >= std::chrono::seconds(60)) {
+        last_hold_log_ = std::chrono::steady_clock::now();
+        INDRIVE_LOG(kInfo, "learner")
+            << "snapshot due at " << updates << " updates waits: a reader has not yet "
+            << "acknowledged v" << newest_->version() << " (" << newest_->params().size() / 1e6
+            << " MB), so a new one would start it over; it goes when every reader has it, or "
+               "after learner.snapshot_hold_s (logged at most once a minute)";
+      }
+    }
+    return false;
+  }
+  if (held_ && !delivered()) {
+    ++holds_expired_;
+    INDRIVE_LOG(kWarn, "learner") << "v" << newest_->version()
+                                  << " was not acknowledged by every reader within "
+                                     "learner.snapshot_hold_s = "
+                                  << hold_s_ << " s; publishing the next anyway (a reader has "
+                                  << "gone, or its link carries less than one snapshot per "
+                                  << hold_s_ << " s)";
+  }
+  held_ = false;
+  due_ = false;
+  return true;
+}
+
+void SnapshotPublisher::write_final_file(const std::filesystem::path& path,
+                                         const agent::AgentConfig& agent) const {
+  if (!newest_) return;
+  try {
+    agent::write_snapshot_file(
+        path, newest_->params(), agent,
+        agent::SnapshotProvenance{
+            .run_id = run_id_, .version = newest_->version(), .env_steps = newest_->env_steps()});
+    INDRIVE_LOG(kInfo, "learner") << "final snapshot v" << newest_->version() << " written to "
+                                  << path.string();
+  } catch (const std::exception& error) {
+    INDRIVE_LOG(kError, "learner")
+        << "the final snapshot v" << newest_->version() << " could not be written to "
+        << path.string() << " (" << error.what()
+        << "); evaluators still receive it over DDS while the learner "
+           "runs";
+  }
 }
 
 int SnapshotPublisher::readers() const {

@@ -14,6 +14,8 @@
 #include <thread>
 #include <vector>
 
+#include "indrive/agent/agent.h"
+#include "indrive/agent/snapshot_file.h"
 #include "indrive/basics/run_dir.h"
 #include "indrive/learner/checkpoint.h"
 #include "testing.h"
@@ -129,44 +131,70 @@ TEST(SnapshotPublisherTest, PublishesKeepsRepublishesAndAnnounces) {
   EXPECT_TRUE(done_flags.back()) << "the final announce says the run is done";
 }
 
-// A late joiner's request that arrives while the last snapshot is still on its way to another
-// reader cannot be served at once (a second write would start that reader over): it is kept
-// and served as soon as the write is acknowledged, not dropped. The reader here holds the first
-// snapshot in its callback, so its participant acknowledges nothing until the test lets go;
-// intraprocess delivery is off, or the write would run that callback on the writer's thread.
-TEST(SnapshotPublisherTest, ARequestWhileTheLastWriteIsUnacknowledgedIsServedOnceItIs) {
-  eprosima::fastrtps::LibrarySettingsAttributes library;
-  library.intraprocess_delivery = eprosima::fastrtps::INTRAPROCESS_OFF;
-  eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings(library);
-  const dds::ParticipantOptions options{
-      .domain_id = testing::unique_domain_id(),
-      .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()};
-  dds::EndpointSet learner(options);
-  SnapshotPublisher publisher(learner, "run-q", /*hold_s=*/60.0);
-  dds::EndpointSet actor(options);
+// A publisher and an actor whose snapshot reader holds the first snapshot in its callback, so
+// its participant acknowledges nothing until the test lets go; intraprocess delivery is off, or
+// the write would run that callback on the writer's thread.
+struct HeldReader {
+  HeldReader(const std::string& run_id, double hold_s)
+      : options(single_host_options()),
+        learner(options),
+        publisher(learner, run_id, hold_s),
+        actor(options) {
+    snapshot_reader = &actor.reader<msg::PolicySnapshot>([this](const msg::PolicySnapshot&) {
+      ++received;
+      while (!let_go.load()) std::this_thread::sleep_for(1ms);
+    });
+    actor.reader<msg::SnapshotAnnounce>([](const msg::SnapshotAnnounce&) {});
+  }
+  ~HeldReader() { let_go = true; }
+
+  static dds::ParticipantOptions single_host_options() {
+    eprosima::fastrtps::LibrarySettingsAttributes library;
+    library.intraprocess_delivery = eprosima::fastrtps::INTRAPROCESS_OFF;
+    eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings(library);
+    return {.domain_id = testing::unique_domain_id(),
+            .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()};
+  }
+  // Waits until the learner's writers match the reader.
+  bool matched() {
+    if (!snapshot_reader->wait_for_matched(1, 10s)) return false;
+    for (int i = 0; i < 1000 && publisher.readers() < 1; ++i) std::this_thread::sleep_for(10ms);
+    return publisher.readers() >= 1;
+  }
+  // Publishes `version` and waits until the reader holds it.
+  bool publish_and_hold(std::uint64_t version) {
+    msg::PolicySnapshot snapshot;
+    snapshot.version(version);
+    snapshot.architecture("image=8");
+    snapshot.heads(msg::HEAD_ENCODER);
+    snapshot.params(std::vector<std::uint8_t>(64, 9));
+    publisher.publish(snapshot, /*done=*/false);
+    for (int i = 0; i < 1000 && received.load() == 0; ++i) std::this_thread::sleep_for(10ms);
+    return received.load() == 1;
+  }
+
+  dds::ParticipantOptions options;
+  dds::EndpointSet learner;
+  SnapshotPublisher publisher;
+  dds::EndpointSet actor;
+  dds::Reader<msg::PolicySnapshot>* snapshot_reader = nullptr;
   std::atomic<int> received{0};
   std::atomic<bool> let_go{false};
-  auto& snapshot_reader = actor.reader<msg::PolicySnapshot>([&](const msg::PolicySnapshot&) {
-    ++received;
-    while (!let_go.load()) std::this_thread::sleep_for(1ms);
-  });
-  actor.reader<msg::SnapshotAnnounce>([](const msg::SnapshotAnnounce&) {});
-  dds::EndpointSet asker(options);
-  auto& requests = asker.writer<msg::SnapshotRequest>();
-  ASSERT_TRUE(snapshot_reader.wait_for_matched(1, 10s));
-  ASSERT_TRUE(requests.wait_for_matched(1, 10s));
-  for (int i = 0; i < 1000 && publisher.readers() < 1; ++i) std::this_thread::sleep_for(10ms);
-  ASSERT_GE(publisher.readers(), 1);
+};
 
-  msg::PolicySnapshot snapshot;
-  snapshot.version(5);
-  snapshot.architecture("image=8");
-  snapshot.heads(msg::HEAD_ENCODER);
-  snapshot.params(std::vector<std::uint8_t>(64, 9));
+// A late joiner's request that arrives while the last snapshot is still on its way to another
+// reader cannot be served at once (a second write would start that reader over): it is kept
+// and served as soon as the write is acknowledged, not dropped.
+TEST(SnapshotPublisherTest, ARequestWhileTheLastWriteIsUnacknowledgedIsServedOnceItIs) {
+  HeldReader rig("run-q", /*hold_s=*/60.0);
+  SnapshotPublisher& publisher = rig.publisher;
+  dds::EndpointSet asker(rig.options);
+  auto& requests = asker.writer<msg::SnapshotRequest>();
+  ASSERT_TRUE(rig.matched());
+  ASSERT_TRUE(requests.wait_for_matched(1, 10s));
+
   EXPECT_FALSE(publisher.serve_request(false)) << "no request yet";
-  publisher.publish(snapshot, /*done=*/false);
-  for (int i = 0; i < 1000 && received.load() == 0; ++i) std::this_thread::sleep_for(10ms);
-  ASSERT_EQ(received.load(), 1);
+  ASSERT_TRUE(rig.publish_and_hold(5));
   ASSERT_FALSE(publisher.ready()) << "the held reader acknowledged the first write";
 
   msg::SnapshotRequest request;
@@ -178,12 +206,88 @@ TEST(SnapshotPublisherTest, ARequestWhileTheLastWriteIsUnacknowledgedIsServedOnc
   EXPECT_FALSE(publisher.serve_request(false)) << "the last write is still on its way";
   EXPECT_TRUE(publisher.request_pending()) << "the request is kept, not dropped";
 
-  let_go = true;
+  rig.let_go = true;
   ASSERT_TRUE(publisher.wait_until_delivered(10s));
   EXPECT_TRUE(publisher.serve_request(false));
   EXPECT_FALSE(publisher.request_pending());
-  for (int i = 0; i < 1000 && received.load() < 2; ++i) std::this_thread::sleep_for(10ms);
-  EXPECT_EQ(received.load(), 2) << "the snapshot written again for the request";
+  for (int i = 0; i < 1000 && rig.received.load() < 2; ++i) std::this_thread::sleep_for(10ms);
+  EXPECT_EQ(rig.received.load(), 2) << "the snapshot written again for the request";
+}
+
+// A due snapshot waits while a reader lacks the last one, counted once as held however often
+// the learner asks, and goes once the reader has it.
+TEST(SnapshotPublisherTest, ADueSnapshotIsHeldUntilTheReaderHasTheLastOne) {
+  HeldReader rig("run-h", /*hold_s=*/60.0);
+  SnapshotPublisher& publisher = rig.publisher;
+  ASSERT_TRUE(rig.matched());
+  EXPECT_FALSE(publisher.take_due(0)) << "nothing is due";
+  publisher.mark_due();
+  EXPECT_TRUE(publisher.take_due(10)) << "the first snapshot waits for nothing";
+  EXPECT_FALSE(publisher.due());
+  ASSERT_TRUE(rig.publish_and_hold(1));
+
+  publisher.mark_due();
+  EXPECT_FALSE(publisher.take_due(20));
+  EXPECT_FALSE(publisher.take_due(21));
+  EXPECT_TRUE(publisher.due()) << "held, still due";
+  EXPECT_EQ(publisher.holds(), 1u);
+  rig.let_go = true;
+  ASSERT_TRUE(publisher.wait_until_delivered(10s));
+  EXPECT_TRUE(publisher.take_due(22));
+  EXPECT_FALSE(publisher.due());
+  EXPECT_EQ(publisher.holds(), 1u);
+  EXPECT_EQ(publisher.holds_expired(), 0u);
+}
+
+// A reader that never acknowledges holds the next snapshot for hold_s, no longer; the hold that
+// ran out is counted. A snapshot published directly (the run's last) is no longer due.
+TEST(SnapshotPublisherTest, AHoldRunsOutAfterHoldSeconds) {
+  HeldReader rig("run-x", /*hold_s=*/0.5);
+  SnapshotPublisher& publisher = rig.publisher;
+  ASSERT_TRUE(rig.matched());
+  ASSERT_TRUE(rig.publish_and_hold(1));
+  publisher.mark_due();
+  EXPECT_FALSE(publisher.take_due(5));
+  std::this_thread::sleep_for(600ms);
+  EXPECT_TRUE(publisher.take_due(6));
+  EXPECT_EQ(publisher.holds(), 1u);
+  EXPECT_EQ(publisher.holds_expired(), 1u);
+
+  publisher.mark_due();
+  msg::PolicySnapshot last = *publisher.newest();
+  last.version(2);
+  publisher.publish(last, /*done=*/true);
+  EXPECT_FALSE(publisher.due());
+}
+
+// The final snapshot file holds the newest snapshot with its provenance; none before the first.
+TEST(SnapshotPublisherTest, TheFinalFileHoldsTheNewestSnapshotAndItsProvenance) {
+  testing::TempDir dir;
+  const dds::ParticipantOptions options{
+      .domain_id = testing::unique_domain_id(),
+      .profiles_file = testing::source_path("deploy/dds/single_host.xml").string()};
+  dds::EndpointSet learner(options);
+  SnapshotPublisher publisher(learner, "run-f", /*hold_s=*/10.0);
+  agent::AgentConfig agent_config = agent::preset("tiny");
+  const fs::path file = dir.path() / "final-snapshot.params";
+  publisher.write_final_file(file, agent_config);
+  EXPECT_FALSE(fs::exists(file)) << "no snapshot yet";
+
+  const std::vector<std::uint8_t> params = agent::Agent(agent_config).snapshot();
+  msg::PolicySnapshot snapshot;
+  snapshot.version(9);
+  snapshot.env_steps(1234);
+  snapshot.params(params);
+  publisher.publish(snapshot, /*done=*/true);
+  publisher.write_final_file(file, agent_config);
+  const agent::SnapshotFile read = agent::read_snapshot_file(file);
+  EXPECT_EQ(read.blob, params);
+  ASSERT_TRUE(read.provenance());
+  EXPECT_EQ(read.provenance()->run_id, "run-f");
+  EXPECT_EQ(read.provenance()->version, 9u);
+  EXPECT_EQ(read.provenance()->env_steps, 1234u);
+
+  publisher.write_final_file(dir.path() / "no-such-dir" / "x.params", agent_config);  // logged
 }
 
 }  // namespace

@@ -30,10 +30,6 @@ struct LearnerStats {
   std::uint64_t sequence_gaps = 0;  // chunks whose predecessor of the same actor never came
   std::uint64_t snapshots_published = 0;
   std::uint64_t snapshot_requests = 0;  // republished on a late joiner's SnapshotRequest
-  // Snapshots that came due while a reader still lacked the last one, and waited for it; of
-  // them, those written after learner.snapshot_hold_s without every reader's acknowledgment.
-  std::uint64_t snapshots_held = 0;
-  std::uint64_t snapshot_holds_expired = 0;
   std::uint64_t episodes = 0;
   std::uint64_t failed_updates = 0;
   std::uint64_t checkpoints = 0;

@@ -9,11 +9,15 @@
 // learner publishes, the reader would never hold a whole snapshot. So a snapshot is written only
 // once every matched reader has acknowledged the last one, or when the last one has waited
 // `hold_s` (a reader that is gone keeps its match until its lease ends and must not stop the
-// others' snapshots for longer).
+// others' snapshots for longer). The learner marks a snapshot due every snapshot_every updates;
+// take_due() says when it may go, so a slow reader gets fewer snapshots, each of them whole, and
+// the parameters are taken when it goes. The run's last snapshot is also kept as a file
+// (write_final_file), so it can be evaluated without the learner.
 //
 //   VersionReservation versions(run.checkpoints() / "policy_versions_reserved");
 //   SnapshotPublisher publisher(endpoints, run_id, hold_s);
-//   if (publisher.ready()) {                        // else: the snapshot is due, try again later
+//   publisher.mark_due();                           // every snapshot_every updates
+//   if (publisher.take_due(updates)) {              // else: held for a reader, try again later
 //     versions.reserve(version);                    // before the version leaves the process
 //     publisher.publish(std::move(snapshot), done); // sealed, written, announced
 //   }
@@ -27,6 +31,7 @@
 #include <optional>
 #include <string>
 
+#include "indrive/agent/agent_config.h"
 #include "indrive/dds/messages.h"
 #include "indrive/dds/participant.h"
 
@@ -68,8 +73,25 @@ class SnapshotPublisher {
   // Whether every matched reader has acknowledged every snapshot written (true before the first).
   bool delivered() const;
   // Seals and writes `snapshot` (its version and contents filled in), keeps it as the newest and
-  // announces it, whether or not ready() (the final snapshot of a run does not wait).
+  // announces it, whether or not ready() (the final snapshot of a run does not wait); a due
+  // snapshot is no longer due.
   void publish(msg::PolicySnapshot snapshot, bool done);
+
+  // Marks a snapshot due.
+  void mark_due() { due_ = true; }
+  bool due() const { return due_; }
+  // True when a snapshot is due and may be written now (ready()); it is then no longer due.
+  // While it may not, it stays due and counts once as held (logged at most once a minute, with
+  // `updates`, the learner's count); one written because hold_s ran out before every reader had
+  // the last one counts as an expired hold (logged).
+  bool take_due(std::int64_t updates);
+  // Due snapshots held for a reader, and holds that ran out, in this process.
+  std::uint64_t holds() const { return holds_; }
+  std::uint64_t holds_expired() const { return holds_expired_; }
+
+  // Writes the newest snapshot to `path` as a snapshot file of `agent` with its provenance (run,
+  // version, env steps); a failure is logged, not thrown: the run's end still goes over DDS.
+  void write_final_file(const std::filesystem::path& path, const agent::AgentConfig& agent) const;
   // Announces the newest snapshot (nothing before the first).
   void announce(bool done);
   // Writes the newest snapshot again and announces it; false when there is none yet, or when
@@ -104,7 +126,13 @@ class SnapshotPublisher {
   dds::Writer<msg::SnapshotAnnounce>& announce_writer_;
   std::atomic<bool> requested_{false};
   std::optional<msg::PolicySnapshot> newest_;
+  double hold_s_;
   std::chrono::steady_clock::duration hold_;
+  bool due_ = false;
+  bool held_ = false;  // the due snapshot waits for a reader to acknowledge the last one
+  std::uint64_t holds_ = 0;
+  std::uint64_t holds_expired_ = 0;
+  std::chrono::steady_clock::time_point last_hold_log_{};
   std::chrono::steady_clock::time_point last_write_{};
   std::chrono::steady_clock::time_point last_announce_{};  // the epoch: due at once
 };
