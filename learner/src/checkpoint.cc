@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "indrive/basics/check.h"
 #include "indrive/basics/checksum.h"
@@ -354,6 +355,50 @@ RunStart start_run(const std::vector<fs::path>& files, const std::string& init_c
   }
   ++start.restored.counters.learner_epoch;
   return start;
+}
+
+CheckpointWriter::CheckpointWriter(fs::path folder, int keep, std::string channel, double every_s)
+    : files_(std::move(folder), keep), channel_(std::move(channel)), every_s_(every_s) {}
+
+double CheckpointWriter::seconds_since_save() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - last_try_).count();
+}
+
+bool CheckpointWriter::save(const LearnerCounters& counters,
+                            std::span<const std::uint8_t> agent_bytes,
+                            std::span<const std::uint8_t> replay_bytes, std::int64_t replay_steps,
+                            bool final) {
+  const auto start = std::chrono::steady_clock::now();
+  // Replay goes into the same file, so counters, model and data always match.
+  const std::vector<std::uint8_t> packed = pack_checkpoint(counters, agent_bytes, replay_bytes);
+  const auto counter = static_cast<std::uint64_t>(counters.updates);
+  fs::path path;
+  try {
+    path = files_.save(counter, packed);
+  } catch (const IoError& error) {
+    last_try_ = std::chrono::steady_clock::now();
+    ++failures_;
+    std::ostringstream next;
+    if (!final) next << "; the next try is in " << every_s_ << " s (free space on that disk)";
+    INDRIVE_LOG(kError, channel_) << (final ? "final " : "") << "checkpoint "
+                                  << files_.path(counter).filename().string() << " ("
+                                  << packed.size() << " bytes) was not written: " << error.what()
+                                  << "; "
+                                  << (latest_.empty() ? "this run has no earlier checkpoint"
+                                                      : "the previous checkpoint " +
+                                                            latest_.string() + " is intact")
+                                  << "; " << failures_ << " failed in this run" << next.str();
+    return false;
+  }
+  last_try_ = std::chrono::steady_clock::now();
+  latest_ = path;
+  ++written_;
+  INDRIVE_LOG(kInfo, channel_) << "checkpoint " << path.filename().string() << " (" << packed.size()
+                               << " bytes: agent " << agent_bytes.size() << ", replay of "
+                               << replay_steps << " steps " << replay_bytes.size() << " -> "
+                               << packed.size() - agent_bytes.size() << " compressed; "
+                               << std::chrono::duration<double>(last_try_ - start).count() << " s)";
+  return true;
 }
 
 }  // namespace indrive::learner

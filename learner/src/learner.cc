@@ -47,7 +47,7 @@ struct Learner::Impl {
                                        ? fs::path(".")
                                        : service.run_dir().parent_path(),
                                    service.run_id())),
-        checkpoints(run.checkpoints(), settings.checkpoint_keep),
+        checkpoints(run.checkpoints(), settings.checkpoint_keep, "learner", settings.checkpoint_s),
         versions(run.checkpoints() / kVersionReserveFile),
         replay(replay_options(agent_config)),
         rate({.replay_ratio = settings.replay_ratio,
@@ -118,7 +118,7 @@ struct Learner::Impl {
   // Restores the newest intact checkpoint of this run, or a finetune's initial checkpoint
   // (start_run).
   void resume() {
-    RunStart start = start_run(checkpoints.list(), settings.init_checkpoint, agent_config,
+    RunStart start = start_run(checkpoints.files().list(), settings.init_checkpoint, agent_config,
                                replay_options(agent_config), config.run_id());
     agent = start.restored.agent ? std::move(start.restored.agent)
                                  : std::make_unique<agent::Agent>(agent_config);
@@ -128,52 +128,17 @@ struct Learner::Impl {
       stats.restored_replay_steps = replay.size();
       stats.resumed_from = start.restored.file;
       stats.skipped_checkpoints = start.restored.skipped;
-      latest_checkpoint = start.restored.file;
+      checkpoints.resumed_from(start.restored.file);
     }
     // Snapshots published after the newest checkpoint used versions up to the reserved mark.
     stats.counters.policy_version = std::max(stats.counters.policy_version, versions.reserved());
   }
 
-  // Writes a checkpoint; returns whether it was written. A write that fails (disk full, I/O
-  // error) is logged and counted but does not end the run: atomic_write leaves the previous
-  // checkpoint as it was and no partial file, and the next checkpoint time tries again.
-  // `final`: the one at exit, which has no next try.
+  // Writes a checkpoint (CheckpointWriter); returns whether it was written. `final`: the one at
+  // exit, which has no next try.
   bool save_checkpoint(bool final = false) {
-    const auto start = Clock::now();
-    // Replay goes into the same file, so counters, model and data always match.
-    const auto agent_bytes = agent->checkpoint_bytes();
-    const auto replay_bytes = replay.to_bytes();
-    const auto packed = pack_checkpoint(stats.counters, agent_bytes, replay_bytes);
-    const auto counter = static_cast<std::uint64_t>(stats.counters.updates);
-    fs::path path;
-    try {
-      path = checkpoints.save(counter, packed);
-    } catch (const IoError& error) {
-      last_checkpoint = Clock::now();
-      ++stats.checkpoint_failures;
-      std::ostringstream next;
-      if (!final)
-        next << "; the next try is in " << settings.checkpoint_s << " s (free space on that disk)";
-      INDRIVE_LOG(kError, "learner")
-          << (final ? "final " : "") << "checkpoint "
-          << checkpoints.path(counter).filename().string() << " (" << packed.size()
-          << " bytes) was not written: " << error.what() << "; "
-          << (latest_checkpoint.empty()
-                  ? "this run has no earlier checkpoint"
-                  : "the previous checkpoint " + latest_checkpoint.string() + " is intact")
-          << "; " << stats.checkpoint_failures << " failed in this run" << next.str();
-      return false;
-    }
-    last_checkpoint = Clock::now();
-    latest_checkpoint = path;
-    ++stats.checkpoints;
-    INDRIVE_LOG(kInfo, "learner") << "checkpoint " << path.filename().string() << " ("
-                                  << packed.size() << " bytes: agent " << agent_bytes.size()
-                                  << ", replay of " << replay.size() << " steps "
-                                  << replay_bytes.size() << " -> "
-                                  << packed.size() - agent_bytes.size() << " compressed; "
-                                  << seconds_since(start) << " s)";
-    return true;
+    return checkpoints.save(stats.counters, agent->checkpoint_bytes(), replay.to_bytes(),
+                            replay.size(), final);
   }
 
   void on_result(const msg::EpisodeResult& result) {
@@ -308,8 +273,8 @@ struct Learner::Impl {
                    {"dropped_undecodable", dds::undecodable_samples()},
                    {"sequence_gaps", stats.sequence_gaps},
                    {"failed_updates", stats.failed_updates},
-                   {"checkpoints", stats.checkpoints},
-                   {"checkpoint_failures", stats.checkpoint_failures},
+                   {"checkpoints", checkpoints.written()},
+                   {"checkpoint_failures", checkpoints.failures()},
                    {"episodes", episodes}});
     if (episodes > 0) record["episode_success_rate"] = static_cast<double>(successes) / episodes;
     record.update(episode_record);
@@ -351,7 +316,6 @@ struct Learner::Impl {
   int run_loop(const std::atomic<bool>& stop) {
     if (fs::is_directory("/dev/shm")) sweeper.emplace("/dev/shm");
     next_sweep = Clock::now();
-    last_checkpoint = Clock::now();
     interval.restart(progress_now());
     while (!stop.load()) {
       bool worked = false;
@@ -369,7 +333,7 @@ struct Learner::Impl {
       if (publisher->seconds_since_announce() >= settings.announce_s) publisher->announce(done);
       log_metrics();
       sweep_shared_memory();
-      if (seconds_since(last_checkpoint) >= settings.checkpoint_s) save_checkpoint();
+      if (checkpoints.seconds_since_save() >= settings.checkpoint_s) save_checkpoint();
       // The budget ends the run once the updates it is owed are done.
       if (settings.budget_env_steps > 0 && stats.counters.env_steps >= settings.budget_env_steps &&
           (rate.options().async || !ready_to_train())) {
@@ -407,8 +371,8 @@ struct Learner::Impl {
       INDRIVE_LOG(kError, "learner")
           << "the final checkpoint could not be written (see the error above), so the learner "
              "exits with code 1: a restart resumes from "
-          << (latest_checkpoint.empty() ? "nothing (this run has no checkpoint)"
-                                        : latest_checkpoint.string())
+          << (checkpoints.latest().empty() ? "nothing (this run has no checkpoint)"
+                                           : checkpoints.latest().string())
           << " and what was trained and received after it is lost; free disk space before the "
              "run continues";
     }
@@ -421,7 +385,7 @@ struct Learner::Impl {
                                   << stats.counters.updates << " updates, policy v"
                                   << stats.counters.policy_version << ", chunks " << stats.chunks
                                   << ", " << chunks.drops().summary() << ", checkpoints "
-                                  << stats.checkpoints << " (" << stats.checkpoint_failures
+                                  << checkpoints.written() << " (" << checkpoints.failures()
                                   << " failed)";
     return code;
   }
@@ -430,7 +394,7 @@ struct Learner::Impl {
   const LearnerConfig settings;  // the learner.* and run.* keys, read once
   agent::AgentConfig agent_config;
   RunDir run;
-  CheckpointFiles checkpoints;
+  CheckpointWriter checkpoints;
   VersionReservation versions;  // policy versions reserved on disk before they are published
   std::unique_ptr<agent::Agent> agent;  // set by resume()
   agent::ReplayBuffer replay;
@@ -442,7 +406,6 @@ struct Learner::Impl {
   Clock::time_point next_sweep{};
   std::int64_t fill_target = 0;
   std::int64_t fill_floor = 0;
-  fs::path latest_checkpoint;  // the newest intact checkpoint this learner wrote or resumed from
   bool done = false;
 
   // DDS: the endpoint set owns every reader and writer; the publisher and the pacer write on it.
@@ -457,7 +420,6 @@ struct Learner::Impl {
   agent::TrainMetrics last_metrics;
   LearnerStats stats;
   std::function<void(const std::string&)> progress;
-  Clock::time_point last_checkpoint{};
   service::MetricsInterval interval;  // since the last metrics line
   double interval_lag_sum = 0.0;
   std::uint64_t interval_chunks = 0;

@@ -32,7 +32,6 @@ namespace indrive::local {
 namespace fs = std::filesystem;
 namespace {
 
-using Clock = std::chrono::steady_clock;
 
 RunDir open_run(const service::ServiceConfig& config) {
   return RunDir::open_or_create(
@@ -113,7 +112,7 @@ struct LocalRun::Impl {
         local(local_settings(service.config())),
         agent_config(local_agent_config(service, local, settings)),
         run(open_run(service)),
-        checkpoints(run.checkpoints(), settings.checkpoint_keep),
+        checkpoints(run.checkpoints(), settings.checkpoint_keep, "local", settings.checkpoint_s),
         env_config(actor::env_config(service)),
         town(env::load_town(env_config.town, env_config.town_options)),
         adapter_options(actor::EnvAdapter::options_from(service)),
@@ -139,13 +138,14 @@ struct LocalRun::Impl {
   // replay, counters), else the finetune's initial checkpoint, else nothing.
   void resume() {
     learner::RunStart start =
-        learner::start_run(checkpoints.list(), settings.init_checkpoint, agent_config,
+        learner::start_run(checkpoints.files().list(), settings.init_checkpoint, agent_config,
                            trainer.replay().options(), config.run_id());
     base = start.restored.counters;
     if (start.restored.agent) {
       trainer.load_agent(start.restored.agent->checkpoint_bytes(), start.restored.file.string());
     }
     if (start.from != learner::StartedFrom::kCheckpoint) return;
+    checkpoints.resumed_from(start.restored.file);
     // The replay goes on where it stopped: no second random prefill in the middle of a run.
     trainer.replay() = std::move(*start.restored.replay);
     restore_coverage();
@@ -174,23 +174,31 @@ struct LocalRun::Impl {
   std::int64_t env_steps() const { return base.env_steps + trainer.counters().env_steps; }
   std::int64_t updates() const { return base.updates + trainer.counters().updates; }
 
-  void save_checkpoint() {
+  // Writes a checkpoint as the learner does (learner::CheckpointWriter); returns whether it was
+  // written. `final`: the one at the end, which has no next try.
+  bool save_checkpoint(bool final) {
     learner::LearnerCounters counters = base;
     counters.env_steps = env_steps();
     counters.updates = updates();
     counters.policy_version = static_cast<std::uint64_t>(counters.updates);
-    const std::vector<std::uint8_t> agent_bytes = trainer.agent().checkpoint_bytes();
     // With the replay, as the learner's: a resumed run trains on the data it had (the random
     // baseline never trains, so its replay is not kept).
     const std::vector<std::uint8_t> replay_bytes =
         local.random ? std::vector<std::uint8_t>{} : trainer.replay().to_bytes();
-    const fs::path path =
-        checkpoints.save(static_cast<std::uint64_t>(counters.updates),
-                         learner::pack_checkpoint(counters, agent_bytes, replay_bytes));
-    last_checkpoint = Clock::now();
-    INDRIVE_LOG(kInfo, "local") << "checkpoint " << path.filename().string() << " ("
-                                << agent_bytes.size() << " bytes of agent, " << replay_bytes.size()
-                                << " of replay before compression)";
+    return checkpoints.save(counters, trainer.agent().checkpoint_bytes(), replay_bytes,
+                            local.random ? 0 : trainer.replay().size(), final);
+  }
+
+  // The final checkpoint, which must be written: what was trained since the last one is lost
+  // otherwise.
+  void save_final_checkpoint() {
+    if (save_checkpoint(/*final=*/true)) return;
+    throw IoError(
+        "the final checkpoint could not be written (see the error above): a restart "
+        "resumes from " +
+        (checkpoints.latest().empty() ? std::string("nothing (this run has none)")
+                                      : checkpoints.latest().string()) +
+        " and what was trained after it is lost; free disk space and run again");
   }
 
   void on_update(const agent::TrainMetrics& step) {
@@ -269,7 +277,6 @@ struct LocalRun::Impl {
   }
 
   void train(const std::atomic<bool>& stop) {
-    last_checkpoint = Clock::now();
     interval.restart(progress_now());
     const auto on_metrics = [this](const agent::TrainMetrics& step) {
       on_update(step);
@@ -282,12 +289,12 @@ struct LocalRun::Impl {
       trainer.run(slice, on_metrics, &stop);
       if (interval.due(progress_now(), settings.log_interval_s, settings.log_every_env_steps))
         log_metrics();
-      if (seconds_since(last_checkpoint) >= settings.checkpoint_s) save_checkpoint();
+      if (checkpoints.seconds_since_save() >= settings.checkpoint_s) save_checkpoint(false);
     }
     // A session that took no step (budget already reached) leaves the files of the last one.
     if (trainer.counters().env_steps == 0) return;
     if (env_steps() != interval.start_env_steps()) log_metrics();
-    save_checkpoint();
+    save_final_checkpoint();
     // The acting policy as a snapshot file, evaluable without this run directory
     // (indrive-actor --evaluate --snapshot FILE).
     agent::write_snapshot_file(run.path() / "snapshot.params", trainer.agent().snapshot(),
@@ -305,7 +312,7 @@ struct LocalRun::Impl {
   const LocalSettings local;              // the local.* keys
   agent::AgentConfig agent_config;
   RunDir run;
-  CheckpointFiles checkpoints;
+  learner::CheckpointWriter checkpoints;
   const env::EnvConfig env_config;
   env::Town town;  // for coverage; the Env loads its own copy when it starts
   const actor::EnvAdapterOptions adapter_options;
@@ -318,7 +325,6 @@ struct LocalRun::Impl {
   std::map<std::string, std::pair<double, std::int64_t>> interval_sums;
   std::int64_t non_finite = 0;
   std::function<void(const std::string&)> progress;
-  Clock::time_point last_checkpoint{};
   service::MetricsInterval interval;  // since the last metrics line
   std::int64_t logged_episodes = 0;
   learner::TrainingEpisodes train_episodes{run.train_episodes_path(),
@@ -334,7 +340,7 @@ void LocalRun::on_progress(std::function<void(const std::string&)> callback) {
   impl_->progress = std::move(callback);
 }
 void LocalRun::train(const std::atomic<bool>& stop) { impl_->train(stop); }
-void LocalRun::save_checkpoint() { impl_->save_checkpoint(); }
+void LocalRun::save_checkpoint() { impl_->save_final_checkpoint(); }
 std::int64_t LocalRun::env_steps() const { return impl_->env_steps(); }
 std::int64_t LocalRun::updates() const { return impl_->updates(); }
 agent::Agent& LocalRun::agent() { return impl_->trainer.agent(); }

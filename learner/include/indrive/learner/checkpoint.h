@@ -2,6 +2,7 @@
 // local trainer start from. The files rotate in <run>/checkpoints/ (basics' CheckpointFiles).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -13,6 +14,7 @@
 
 #include "indrive/agent/agent.h"
 #include "indrive/agent/replay.h"
+#include "indrive/basics/run_dir.h"
 
 namespace indrive::learner {
 
@@ -47,6 +49,43 @@ std::vector<std::uint8_t> pack_checkpoint(const LearnerCounters& counters,
 LearnerCounters unpack_checkpoint(std::span<const std::uint8_t> bytes,
                                   std::vector<std::uint8_t>& agent_bytes,
                                   std::vector<std::uint8_t>* replay_bytes = nullptr);
+
+// Writes a training run's checkpoints, for the learner and `indrive-train-local` alike: counters,
+// agent and replay packed (pack_checkpoint) into <run>/checkpoints/, the newest `keep` kept. A
+// write that fails (disk full, I/O error) is logged and counted but not thrown: atomic_write
+// leaves the previous checkpoint as it was and no partial file, and the next checkpoint time
+// tries again.
+//
+//   CheckpointWriter writer(run.checkpoints(), keep, "learner", checkpoint_s);
+//   if (writer.seconds_since_save() >= checkpoint_s) writer.save(counters, agent, replay, steps);
+class CheckpointWriter {
+ public:
+  // channel: the log channel; every_s: the checkpoint period (said in a failure's message).
+  CheckpointWriter(std::filesystem::path folder, int keep, std::string channel, double every_s);
+
+  // Writes one checkpoint (`replay_steps`: the steps `replay_bytes` holds, for the log line);
+  // returns whether it was written. `final`: the one at exit, which has no next try.
+  bool save(const LearnerCounters& counters, std::span<const std::uint8_t> agent_bytes,
+            std::span<const std::uint8_t> replay_bytes, std::int64_t replay_steps,
+            bool final = false);
+  // The newest intact checkpoint this run wrote or resumed from (empty: none).
+  const std::filesystem::path& latest() const { return latest_; }
+  void resumed_from(std::filesystem::path file) { latest_ = std::move(file); }
+  // Seconds since the last try (or since construction).
+  double seconds_since_save() const;
+  std::uint64_t written() const { return written_; }
+  std::uint64_t failures() const { return failures_; }
+  const CheckpointFiles& files() const { return files_; }
+
+ private:
+  CheckpointFiles files_;
+  std::string channel_;
+  double every_s_;
+  std::filesystem::path latest_;
+  std::uint64_t written_ = 0;
+  std::uint64_t failures_ = 0;
+  std::chrono::steady_clock::time_point last_try_ = std::chrono::steady_clock::now();
+};
 
 // A run restored from one checkpoint file.
 struct RestoredRun {

@@ -32,10 +32,6 @@ struct LearnerStats {
   std::uint64_t snapshot_requests = 0;  // republished on a late joiner's SnapshotRequest
   std::uint64_t episodes = 0;
   std::uint64_t failed_updates = 0;
-  std::uint64_t checkpoints = 0;
-  // Checkpoints that could not be written (disk full, I/O error); the run went on and the
-  // previous checkpoint stayed as it was.
-  std::uint64_t checkpoint_failures = 0;
   std::int64_t restored_replay_steps = 0;  // replay steps restored from the checkpoint
   std::filesystem::path resumed_from;      // the checkpoint the learner resumed from, if any
   // Damaged checkpoints, newer than resumed_from, that the resume skipped (and set aside).

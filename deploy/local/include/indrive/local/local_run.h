@@ -57,7 +57,8 @@ class LocalRun {
   // learner.checkpoint_minutes and at the end, and coverage.csv (continued across resumes) at
   // the end. A run whose budget is already reached returns at once and rewrites nothing.
   void train(const std::atomic<bool>& stop);
-  // Writes a checkpoint of the agent and the counters now (learner checkpoint format).
+  // Writes a checkpoint of the agent, replay and counters now (learner checkpoint format);
+  // throws IoError when it cannot be written.
   void save_checkpoint();
 
   // Env steps of the whole run, resumed ones included.
