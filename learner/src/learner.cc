@@ -313,7 +313,16 @@ struct Learner::Impl {
     }
   }
 
+  // The run: the loop until the budget or the stop, then its end.
   int run_loop(const std::atomic<bool>& stop) {
+    train_until(stop);
+    return finish();
+  }
+
+  // Each turn: an update when the replay ratio allows one, the chunks that came, the pacing, the
+  // snapshot when due, late joiners' requests, announces, metrics, the shared-memory sweep and
+  // the checkpoint when due. Sets `done` when the budget is spent.
+  void train_until(const std::atomic<bool>& stop) {
     if (fs::is_directory("/dev/shm")) sweeper.emplace("/dev/shm");
     next_sweep = Clock::now();
     interval.restart(progress_now());
@@ -342,6 +351,11 @@ struct Learner::Impl {
       }
       if (!worked) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
+  }
+
+  // The run's end: what was received is stored, the last snapshot published and kept as a file,
+  // the final checkpoint written, the final announce made reliably. Returns the exit code.
+  int finish() {
     // Chunks already received are stored, so the final checkpoint keeps them.
     drain();
     // At the budget's end a run that never published a snapshot (snapshot_every above its
