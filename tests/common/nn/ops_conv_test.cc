@@ -5,11 +5,6 @@
 namespace indrive::nn {
 namespace {
 
-using testing::check_gradients;
-using testing::fill_uniform;
-using testing::GradTolerance;
-using testing::OpsTest;
-
 // Direct NHWC convolution for reference; w is (K*K*C, O) ordered (ky, kx, c).
 std::vector<float> naive_conv(const Parameter& x, const Parameter& w, int k, int s, int p, int oh,
                               int ow, int oc) {

@@ -5,11 +5,6 @@
 namespace indrive::nn {
 namespace {
 
-using testing::check_gradients;
-using testing::fill_uniform;
-using testing::GradTolerance;
-using testing::OpsTest;
-
 TEST_F(OpsTest, CategoricalOps) {
   Parameter& logits = input("logits", {3, 2 * 4}, -2.0f, 2.0f);
   Parameter& other = input("other", {3, 2 * 4}, -2.0f, 2.0f);

@@ -5,11 +5,6 @@
 namespace indrive::nn {
 namespace {
 
-using testing::check_gradients;
-using testing::fill_uniform;
-using testing::GradTolerance;
-using testing::OpsTest;
-
 TEST_F(OpsTest, BinaryOpsBroadcastValues) {
   Tensor a = constant({2, 3}, std::vector<float>{1, 2, 3, 4, 5, 6});
   Tensor row = constant({3}, std::vector<float>{10, 20, 30});

@@ -5,11 +5,6 @@
 namespace indrive::nn {
 namespace {
 
-using testing::check_gradients;
-using testing::fill_uniform;
-using testing::GradTolerance;
-using testing::OpsTest;
-
 TEST_F(OpsTest, MatmulAndLinearGradients) {
   Parameter& x = input("x", {5, 7});
   Parameter& w = input("w", {7, 3});

@@ -5,11 +5,6 @@
 namespace indrive::nn {
 namespace {
 
-using testing::check_gradients;
-using testing::fill_uniform;
-using testing::GradTolerance;
-using testing::OpsTest;
-
 TEST_F(OpsTest, LayerNormGradientsAndValues) {
   Parameter& x = input("x", {4, 8}, -2.0f, 2.0f);
   Parameter& g = input("g", {8}, 0.5f, 1.5f);

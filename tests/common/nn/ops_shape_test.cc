@@ -4,11 +4,6 @@
 namespace indrive::nn {
 namespace {
 
-using testing::check_gradients;
-using testing::fill_uniform;
-using testing::GradTolerance;
-using testing::OpsTest;
-
 TEST_F(OpsTest, StopGradientBlocksFlow) {
   Parameter& x = input("x", {3, 3});
   current_graph().backward(sum(mul(x.tensor(), stop_gradient(x.tensor()))));

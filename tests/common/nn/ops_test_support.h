@@ -39,3 +39,10 @@ class OpsTest : public ::testing::Test {
 };
 
 }  // namespace indrive::nn::testing
+
+namespace indrive::nn {
+using testing::check_gradients;
+using testing::fill_uniform;
+using testing::GradTolerance;
+using testing::OpsTest;
+}  // namespace indrive::nn
