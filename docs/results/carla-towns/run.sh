@@ -64,13 +64,17 @@ for s in 0 1 2; do
   wait
 done
 # DreamerV3 from scratch on carla_town01's routes at the same total budget (110,000 task
-# steps), LF and CA side by side, one core each; on 2026-12-07 23-27 minutes of training
-# each, then both protocols' evaluations.
-for t in lane_following collision_avoidance; do
-  deploy/experiments/paper_grid.sh dreamer --towns carla --out runs/carla-grid --seed 0 --task "$t" \
-    --episodes 50 &
+# steps), LF and CA side by side, one core each: seed 0 on 2026-12-07 (23-27 minutes of
+# training each, then both protocols' evaluations); seeds 1 and 2 on 2026-12-08 with
+# INDRIVE_GRID_BIN naming a copy of the binaries of commit b703976 (43-49 minutes per seed,
+# training and evaluations, beside builds and tests).
+for s in 0 1 2; do
+  for t in lane_following collision_avoidance; do
+    deploy/experiments/paper_grid.sh dreamer --towns carla --out runs/carla-grid --seed "$s" --task "$t" \
+      --episodes 50 &
+  done
+  wait
 done
-wait
 
 # The page: each evaluation's CSV under sanity/eval/ and shipped/eval/ with their reports, and
 # the grid's runs, CSVs, the snapshots of seeds 0-2, pretraining summary and report.
