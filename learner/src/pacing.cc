@@ -16,12 +16,12 @@ Pacer::Pacer(dds::EndpointSet& endpoints, std::string run_id)
       allowances_(endpoints.writer<msg::StepAllowance>()),
       heartbeats_(endpoints.writer<msg::Heartbeat>()) {}
 
-void Pacer::publish(const PacingState& state, bool force) {
+bool Pacer::publish(const PacingState& state, bool force) {
   const double since_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - last_).count();
   const bool changed =
       state.allowed != published_allowance_ || state.env_steps != published_received_;
-  if (!force && !(changed && since_s > 0.005) && since_s < 0.1) return;
+  if (!force && !(changed && since_s > 0.005) && since_s < 0.1) return false;
   msg::StepAllowance allowance;
   allowance.run_id(run_id_);
   allowance.total_env_steps(state.allowed);
@@ -46,6 +46,7 @@ void Pacer::publish(const PacingState& state, bool force) {
   published_allowance_ = state.allowed;
   published_received_ = state.env_steps;
   last_ = std::chrono::steady_clock::now();
+  return true;
 }
 
 }  // namespace indrive::learner

@@ -36,8 +36,9 @@ class Pacer {
   Pacer(dds::EndpointSet& endpoints, std::string run_id);
 
   // Writes both messages when `force`, when the allowance or the received count changed (at
-  // most every 5 ms), or when the last went out 100 ms ago or more; else nothing.
-  void publish(const PacingState& state, bool force);
+  // most every 5 ms), or when the last went out 100 ms ago or more; else nothing. Returns
+  // whether it wrote.
+  bool publish(const PacingState& state, bool force);
 
  private:
   std::string run_id_;
